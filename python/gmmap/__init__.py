@@ -1,0 +1,25 @@
+"""gmmap: communication-efficient multi-robot mapping with Gaussian Mixture Model submaps."""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from gmmap.em import fit_gmm
+from gmmap.errors import FileFormatError, GmmapError, InvalidGmmError, InvalidInputError
+from gmmap.gmm import FitInfo, Gmm
+from gmmap.points import voxel_filter
+
+try:
+    __version__ = version("gmmap")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0.0.0+unknown"
+
+__all__ = [
+    "FileFormatError",
+    "FitInfo",
+    "Gmm",
+    "GmmapError",
+    "InvalidGmmError",
+    "InvalidInputError",
+    "__version__",
+    "fit_gmm",
+    "voxel_filter",
+]

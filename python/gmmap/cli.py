@@ -1,0 +1,100 @@
+"""The one command-line entry point: ``gmmap``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from gmmap import __version__
+
+
+def _log(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="gmmap")
+def main() -> None:
+    """gmmap: multi-robot mapping with Gaussian Mixture Model submaps."""
+
+
+@main.command()
+@click.option("--components", default=100, show_default=True, help="GMM components.")
+@click.option("--voxel", default=0.02, show_default=True, help="Voxel size before fitting (m).")
+@click.option("--covariance", type=click.Choice(["diag", "full"]), default="diag",
+              show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def demo(components: int, voxel: float, covariance: str, as_json: bool) -> None:
+    """Fit a GMM to real TUM fr1_xyz depth frames shipped with gmmap and report it."""
+    from gmmap.demo import run_demo
+
+    r = run_demo(components, voxel, covariance, log=_log)
+    if as_json:
+        click.echo(json.dumps(r))
+        return
+    click.echo(
+        f"frames          {r['frames']}\n"
+        f"points          {r['raw_points']:,} raw, {r['points']:,} voxelised ({voxel} m)\n"
+        f"components      {r['components']} ({covariance}), {r['iterations']} EM iterations, "
+        f"converged={r['converged']}\n"
+        f"log-likelihood  {r['log_likelihood']:.4f} per point\n"
+        f"float32 bytes   GMM {r['gmm_float32_bytes']:,} vs points {r['points_float32_bytes']:,} "
+        f"({r['compression']:.0f}x smaller)\n"
+        f"time            load {r['load_time_s']*1e3:.0f} ms, fit {r['fit_time_s']*1e3:.1f} ms"
+    )
+
+
+@main.group()
+def bench() -> None:
+    """Benchmarks against named baselines (ratios, measured in one run)."""
+
+
+@bench.command("em")
+@click.option("--points", "n", default=50_000, show_default=True, help="Points to fit.")
+@click.option("--components", "k", default=100, show_default=True)
+@click.option("--iterations", default=30, show_default=True, help="Fixed EM iterations (tol=0).")
+@click.option("--covariance", type=click.Choice(["diag", "full"]), default="diag",
+              show_default=True)
+@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="TUM RGB-D folder (default: ../shared/data/tum_fr1_xyz, else the bundled slice).")
+@click.option("--repeats", default=3, show_default=True, help="Best time of this many runs.")
+@click.option("--scaling", is_flag=True, help="Also time N = 10k…500k and K = 25…400.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def bench_em(n: int, k: int, iterations: int, covariance: str, data: Path | None, repeats: int,
+             scaling: bool, as_json: bool) -> None:
+    """EM speed and log-likelihood against scikit-learn's GaussianMixture."""
+    from gmmap import bench as b
+
+    root = data or b.default_scene()
+    _log(f"scene: {root}")
+    pts = b.scene_points(n, root)
+    _log(f"comparing on {len(pts):,} points, K={k}, {iterations} iterations")
+    result = b.em_comparison(pts, k, iterations, covariance, repeats)
+    result["scene"] = str(root)
+    if scaling:
+        big = b.scene_points(500_000, root, voxel=None, frames=80)
+        ns = [10_000, 50_000, 100_000, 200_000, 500_000]
+        result["scaling_n"] = b.em_scaling(ns, [k], big, progress=_log)
+        result["scaling_k"] = b.em_scaling([n], [25, 50, 100, 200, 400], pts, progress=_log)
+    if as_json:
+        click.echo(json.dumps(result, indent=2))
+        return
+    g, s = result["gmmap"], result["sklearn"]
+    click.echo(f"gmmap    {g['time_s']*1e3:8.1f} ms  log-likelihood {g['log_likelihood']:.4f}")
+    if s is None:
+        click.echo("sklearn  not installed (pip install scikit-learn): no baseline")
+    else:
+        click.echo(f"sklearn  {s['time_s']*1e3:8.1f} ms  log-likelihood {s['log_likelihood']:.4f}")
+        click.echo(f"speed-up {result['speedup']:.1f}x, log-likelihood difference "
+                   f"{result['log_likelihood_diff']:+.4f}")
+    for key in ("scaling_n", "scaling_k"):
+        for row in result.get(key, []):
+            click.echo(f"N={row['points']:>7,} K={row['components']:>3}: "
+                       f"{row['time_s']*1e3:8.1f} ms, peak +{row['peak_extra_mb']:.1f} MB")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
