@@ -57,8 +57,12 @@ def _best_time(fn, repeats: int):
 
 
 def em_comparison(
-    points: np.ndarray, k: int = 100, iterations: int = 30, covariance: str = "diag",
-    repeats: int = 3, seed: int = 0,
+    points: np.ndarray,
+    k: int = 100,
+    iterations: int = 30,
+    covariance: str = "diag",
+    repeats: int = 3,
+    seed: int = 0,
 ) -> dict:
     """gmmap's EM against scikit-learn's GaussianMixture: same K, covariance type, k-means++
     initialisation and a fixed iteration count (tol = 0). Best time of ``repeats``; both final
@@ -72,8 +76,11 @@ def em_comparison(
         "covariance": covariance,
         "iterations": iterations,
         "cpus": os.cpu_count(),
-        "gmmap": {"time_s": ours_t, "log_likelihood": ours.score(points),
-                  "n_components": len(ours)},
+        "gmmap": {
+            "time_s": ours_t,
+            "log_likelihood": ours.score(points),
+            "n_components": len(ours),
+        },
     }
     try:
         import warnings
@@ -85,8 +92,14 @@ def em_comparison(
         return result
 
     def sklearn_fit():
-        gm = GaussianMixture(k, covariance_type=covariance, max_iter=iterations, tol=0.0,
-                             init_params="k-means++", random_state=seed)
+        gm = GaussianMixture(
+            k,
+            covariance_type=covariance,
+            max_iter=iterations,
+            tol=0.0,
+            init_params="k-means++",
+            random_state=seed,
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             return gm.fit(points)
@@ -94,8 +107,9 @@ def em_comparison(
     base_t, base = _best_time(sklearn_fit, repeats)
     result["sklearn"] = {"time_s": base_t, "log_likelihood": float(base.score(points))}
     result["speedup"] = base_t / ours_t
-    result["log_likelihood_diff"] = result["gmmap"]["log_likelihood"] - result["sklearn"][
-        "log_likelihood"]
+    result["log_likelihood_diff"] = (
+        result["gmmap"]["log_likelihood"] - result["sklearn"]["log_likelihood"]
+    )
     return result
 
 
@@ -117,8 +131,12 @@ print(json.dumps({"time_s": t, "peak_extra_mb": max(0, peak - before) / 1024}))
 
 
 def em_scaling(
-    ns: list[int], ks: list[int], points: np.ndarray, iterations: int = 10,
-    covariance: str = "diag", progress=None,
+    ns: list[int],
+    ks: list[int],
+    points: np.ndarray,
+    iterations: int = 10,
+    covariance: str = "diag",
+    progress=None,
 ) -> list[dict]:
     """Time and peak extra memory of one fit per (N, K), each in a fresh process."""
     import tempfile
@@ -133,8 +151,16 @@ def em_scaling(
                     progress(f"scaling: N={n} K={k}")
                 out = subprocess.run(
                     [sys.executable, "-c", _CHILD, str(path), str(k), covariance, str(iterations)],
-                    check=True, capture_output=True, text=True,
+                    check=True,
+                    capture_output=True,
+                    text=True,
                 )
-                rows.append({"points": min(n, len(points)), "components": k,
-                             "iterations": iterations, **json.loads(out.stdout)})
+                rows.append(
+                    {
+                        "points": min(n, len(points)),
+                        "components": k,
+                        "iterations": iterations,
+                        **json.loads(out.stdout),
+                    }
+                )
     return rows

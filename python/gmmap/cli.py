@@ -24,8 +24,9 @@ def main() -> None:
 @main.command()
 @click.option("--components", default=100, show_default=True, help="GMM components.")
 @click.option("--voxel", default=0.02, show_default=True, help="Voxel size before fitting (m).")
-@click.option("--covariance", type=click.Choice(["diag", "full"]), default="diag",
-              show_default=True)
+@click.option(
+    "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def demo(components: int, voxel: float, covariance: str, as_json: bool) -> None:
     """Fit a GMM to real TUM fr1_xyz depth frames shipped with gmmap and report it."""
@@ -43,7 +44,7 @@ def demo(components: int, voxel: float, covariance: str, as_json: bool) -> None:
         f"log-likelihood  {r['log_likelihood']:.4f} per point\n"
         f"float32 bytes   GMM {r['gmm_float32_bytes']:,} vs points {r['points_float32_bytes']:,} "
         f"({r['compression']:.0f}x smaller)\n"
-        f"time            load {r['load_time_s']*1e3:.0f} ms, fit {r['fit_time_s']*1e3:.1f} ms"
+        f"time            load {r['load_time_s'] * 1e3:.0f} ms, fit {r['fit_time_s'] * 1e3:.1f} ms"
     )
 
 
@@ -56,15 +57,27 @@ def bench() -> None:
 @click.option("--points", "n", default=50_000, show_default=True, help="Points to fit.")
 @click.option("--components", "k", default=100, show_default=True)
 @click.option("--iterations", default=30, show_default=True, help="Fixed EM iterations (tol=0).")
-@click.option("--covariance", type=click.Choice(["diag", "full"]), default="diag",
-              show_default=True)
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              help="TUM RGB-D folder (default: ../shared/data/tum_fr1_xyz, else the bundled slice).")
+@click.option(
+    "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
+)
+@click.option(
+    "--data",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="TUM RGB-D folder (default: ../shared/data/tum_fr1_xyz, else the bundled slice).",
+)
 @click.option("--repeats", default=3, show_default=True, help="Best time of this many runs.")
 @click.option("--scaling", is_flag=True, help="Also time N = 10k…500k and K = 25…400.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def bench_em(n: int, k: int, iterations: int, covariance: str, data: Path | None, repeats: int,
-             scaling: bool, as_json: bool) -> None:
+def bench_em(
+    n: int,
+    k: int,
+    iterations: int,
+    covariance: str,
+    data: Path | None,
+    repeats: int,
+    scaling: bool,
+    as_json: bool,
+) -> None:
     """EM speed and log-likelihood against scikit-learn's GaussianMixture."""
     from gmmap import bench as b
 
@@ -83,17 +96,23 @@ def bench_em(n: int, k: int, iterations: int, covariance: str, data: Path | None
         click.echo(json.dumps(result, indent=2))
         return
     g, s = result["gmmap"], result["sklearn"]
-    click.echo(f"gmmap    {g['time_s']*1e3:8.1f} ms  log-likelihood {g['log_likelihood']:.4f}")
+    click.echo(f"gmmap    {g['time_s'] * 1e3:8.1f} ms  log-likelihood {g['log_likelihood']:.4f}")
     if s is None:
         click.echo("sklearn  not installed (pip install scikit-learn): no baseline")
     else:
-        click.echo(f"sklearn  {s['time_s']*1e3:8.1f} ms  log-likelihood {s['log_likelihood']:.4f}")
-        click.echo(f"speed-up {result['speedup']:.1f}x, log-likelihood difference "
-                   f"{result['log_likelihood_diff']:+.4f}")
+        click.echo(
+            f"sklearn  {s['time_s'] * 1e3:8.1f} ms  log-likelihood {s['log_likelihood']:.4f}"
+        )
+        click.echo(
+            f"speed-up {result['speedup']:.1f}x, log-likelihood difference "
+            f"{result['log_likelihood_diff']:+.4f}"
+        )
     for key in ("scaling_n", "scaling_k"):
         for row in result.get(key, []):
-            click.echo(f"N={row['points']:>7,} K={row['components']:>3}: "
-                       f"{row['time_s']*1e3:8.1f} ms, peak +{row['peak_extra_mb']:.1f} MB")
+            click.echo(
+                f"N={row['points']:>7,} K={row['components']:>3}: "
+                f"{row['time_s'] * 1e3:8.1f} ms, peak +{row['peak_extra_mb']:.1f} MB"
+            )
 
 
 if __name__ == "__main__":

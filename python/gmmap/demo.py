@@ -14,16 +14,19 @@ from gmmap.em import fit_gmm
 from gmmap.points import voxel_filter
 
 
-def run_demo(components: int = 100, voxel: float = 0.02, covariance: str = "diag",
-             log=print) -> dict:
+def run_demo(
+    components: int = 100, voxel: float = 0.02, covariance: str = "diag", log=print
+) -> dict:
     seq = TumRgbd(BUNDLED_TUM_SLICE)
     log(f"loading {len(seq)} depth frames of TUM fr1_xyz (bundled slice)")
     start = time.perf_counter()
     raw = np.concatenate([f.world_points() for f in seq])
     pts = voxel_filter(raw, voxel)
     t_load = time.perf_counter() - start
-    log(f"{len(raw):,} points, {len(pts):,} after a {voxel} m voxel filter; fitting {components} "
-        f"{covariance} components")
+    log(
+        f"{len(raw):,} points, {len(pts):,} after a {voxel} m voxel filter; fitting {components} "
+        f"{covariance} components"
+    )
     gmm = fit_gmm(pts, components, covariance)
     info = gmm.fit_info
     return {

@@ -125,7 +125,7 @@ class Gmm:
         return Gmm(self.weights, self.means @ R.T + t, covs)
 
     def save(self, path: str | os.PathLike) -> None:
-        """Writes the mixture to ``path`` (npz container); atomic, so a crash leaves no half file."""
+        """Writes the mixture to ``path`` (npz); atomic, so a crash never leaves half a file."""
         path = Path(path)
         fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.")
         try:

@@ -77,8 +77,10 @@ pub fn fit(points: &[[f64; 3]], opts: &EmOptions) -> Result<EmResult, CoreError>
     validate(points, opts)?;
     // Work around the centroid: keeps squares small and the grid origin well-conditioned.
     let centre = centroid(points);
-    let pts: Vec<[f64; 3]> =
-        points.iter().map(|p| [p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]]).collect();
+    let pts: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| [p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]])
+        .collect();
 
     let mut rng = Rng::new(opts.seed);
     let seeds = match opts.init {
@@ -101,7 +103,12 @@ pub fn fit(points: &[[f64; 3]], opts: &EmOptions) -> Result<EmResult, CoreError>
         }
         prev = log_likelihood;
     }
-    Ok(EmResult { gmm: model.into_gmm(centre), n_iter, converged, log_likelihood })
+    Ok(EmResult {
+        gmm: model.into_gmm(centre),
+        n_iter,
+        converged,
+        log_likelihood,
+    })
 }
 
 fn validate(points: &[[f64; 3]], opts: &EmOptions) -> Result<(), CoreError> {
@@ -116,7 +123,10 @@ fn validate(points: &[[f64; 3]], opts: &EmOptions) -> Result<(), CoreError> {
         return bad(format!("tol must be finite and >= 0, got {}", opts.tol));
     }
     if !(opts.reg_covar.is_finite() && opts.reg_covar > 0.0) {
-        return bad(format!("reg_covar must be finite and > 0, got {}", opts.reg_covar));
+        return bad(format!(
+            "reg_covar must be finite and > 0, got {}",
+            opts.reg_covar
+        ));
     }
     if opts.truncation.is_nan() || opts.truncation <= 0.0 {
         return bad(format!("truncation must be > 0, got {}", opts.truncation));
@@ -126,7 +136,9 @@ fn validate(points: &[[f64; 3]], opts: &EmOptions) -> Result<(), CoreError> {
 
 fn centroid(points: &[[f64; 3]]) -> [f64; 3] {
     let n = points.len() as f64;
-    let s = points.iter().fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]);
+    let s = points
+        .iter()
+        .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]);
     [s[0] / n, s[1] / n, s[2] / n]
 }
 
@@ -216,7 +228,18 @@ impl Model {
 #[inline(always)]
 fn add_weighted(s: &mut [f64], r: f64, d: [f64; 3]) {
     let [x, y, z] = d;
-    let v = [r, r * x, r * y, r * z, r * x * x, r * y * y, r * z * z, r * x * y, r * x * z, r * y * z];
+    let v = [
+        r,
+        r * x,
+        r * y,
+        r * z,
+        r * x * x,
+        r * y * y,
+        r * z * z,
+        r * x * y,
+        r * x * z,
+        r * y * z,
+    ];
     for (a, b) in s.iter_mut().zip(v) {
         *a += b;
     }
@@ -264,23 +287,45 @@ impl Grid {
             let i = |a: usize| (((p[a] - lo[a]) / cell) as u64).min(dims[a] - 1);
             (i(0) * dims[1] + i(1)) * dims[2] + i(2)
         };
-        let mut order: Vec<(u64, u32)> =
-            pts.par_iter().enumerate().map(|(i, p)| (index(p), i as u32)).collect();
+        let mut order: Vec<(u64, u32)> = pts
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| (index(p), i as u32))
+            .collect();
         order.par_sort_unstable();
 
         let mut cells: Vec<Cell> = Vec::new();
         for (pos, &(id, _)) in order.iter().enumerate() {
             if pos == 0 || order[pos - 1].0 != id {
-                let (ix, iy, iz) = (id / (dims[1] * dims[2]), (id / dims[2]) % dims[1], id % dims[2]);
+                let (ix, iy, iz) = (
+                    id / (dims[1] * dims[2]),
+                    (id / dims[2]) % dims[1],
+                    id % dims[2],
+                );
                 let corner = [ix as f64, iy as f64, iz as f64];
-                let lo = [lo[0] + corner[0] * cell, lo[1] + corner[1] * cell, lo[2] + corner[2] * cell];
-                cells.push(Cell { lo, start: pos, end: pos });
+                let lo = [
+                    lo[0] + corner[0] * cell,
+                    lo[1] + corner[1] * cell,
+                    lo[2] + corner[2] * cell,
+                ];
+                cells.push(Cell {
+                    lo,
+                    start: pos,
+                    end: pos,
+                });
             }
             cells.last_mut().expect("pushed above").end = pos + 1;
         }
         let gather = |a: usize| order.iter().map(|&(_, i)| pts[i as usize][a]).collect();
         let chunks = split_by_points(&cells, pts.len());
-        Grid { cell, xs: gather(0), ys: gather(1), zs: gather(2), cells, chunks }
+        Grid {
+            cell,
+            xs: gather(0),
+            ys: gather(1),
+            zs: gather(2),
+            cells,
+            chunks,
+        }
     }
 
     /// One E-step: sufficient statistics per component and the summed log-likelihood.
@@ -344,7 +389,8 @@ fn occupied(pts: &[[f64; 3]], lo: [f64; 3], cell: f64) -> usize {
     let mut count = 0;
     for p in pts {
         let i = |a: usize| ((p[a] - lo[a]) / cell) as u64;
-        let h = (i(0).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i(1).wrapping_mul(0xC2B2_AE3D_27D4_EB4F))
+        let h = (i(0).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ i(1).wrapping_mul(0xC2B2_AE3D_27D4_EB4F))
             ^ i(2).wrapping_mul(0x1656_67B1_9E37_79F9);
         let h = (h >> 20) as usize % bits;
         let (w, b) = (h / 64, 1u64 << (h % 64));
@@ -395,7 +441,12 @@ impl Components {
             });
             reach2.push([tau * c.xx, tau * c.yy, tau * c.zz]);
         }
-        Ok(Components { prepared, reach2, diag: opts.covariance == CovType::Diag, tau })
+        Ok(Components {
+            prepared,
+            reach2,
+            diag: opts.covariance == CovType::Diag,
+            tau,
+        })
     }
 
     /// Packs into `work` the components that can reach `cell` (all of them if none can).
@@ -403,7 +454,11 @@ impl Components {
         work.clear();
         for (k, p) in self.prepared.iter().enumerate() {
             let Some(p) = p else { continue };
-            let gap = |a: usize| (cell.lo[a] - p.mean[a]).max(p.mean[a] - cell.lo[a] - size).max(0.0);
+            let gap = |a: usize| {
+                (cell.lo[a] - p.mean[a])
+                    .max(p.mean[a] - cell.lo[a] - size)
+                    .max(0.0)
+            };
             let g = [gap(0), gap(1), gap(2)];
             let reaches = if self.diag {
                 // Exact: the smallest Mahalanobis distance from the mean to the cell.
@@ -455,7 +510,9 @@ impl Work {
     fn push(&mut self, k: usize, p: &Prepared) {
         self.comp.push(k);
         let pr = &p.precision;
-        let v = [p.mean[0], p.mean[1], p.mean[2], pr.xx, pr.yy, pr.zz, pr.xy, pr.xz, pr.yz, p.log_coef];
+        let v = [
+            p.mean[0], p.mean[1], p.mean[2], pr.xx, pr.yy, pr.zz, pr.xy, pr.xz, pr.yz, p.log_coef,
+        ];
         for (f, x) in self.par.iter_mut().zip(v) {
             f.push(x);
         }
@@ -493,7 +550,10 @@ impl Work {
         // Per-point maximum, then exp and sum (all across points: vectorisable).
         let mut max = [f64::NEG_INFINITY; BLOCK];
         for j in 0..m {
-            for (a, &t) in max[..width].iter_mut().zip(&self.terms[j * width..(j + 1) * width]) {
+            for (a, &t) in max[..width]
+                .iter_mut()
+                .zip(&self.terms[j * width..(j + 1) * width])
+            {
                 *a = if t > *a { t } else { *a };
             }
         }
@@ -517,6 +577,8 @@ impl Work {
             let c = [mx[j], my[j], mz[j]];
             let mut lanes = [[0.0; 4]; NSTAT];
             for i0 in (0..width).step_by(4) {
+                // Lane-indexed on purpose: four independent sums that LLVM packs into vectors.
+                #[allow(clippy::needless_range_loop)]
                 for l in 0..4 {
                     let i = i0 + l;
                     let r = row[i] * inv[i];
@@ -571,7 +633,11 @@ mod tests {
     fn recovers_known_means() {
         let (pts, truth) = sample_known(6000, 1);
         for cov in [CovType::Diag, CovType::Full] {
-            let opts = EmOptions { n_components: 3, covariance: cov, ..Default::default() };
+            let opts = EmOptions {
+                n_components: 3,
+                covariance: cov,
+                ..Default::default()
+            };
             let fit = fit(&pts, &opts).unwrap();
             assert_eq!(fit.gmm.len(), 3);
             for m in &truth {
@@ -579,7 +645,10 @@ mod tests {
                     .gmm
                     .means
                     .iter()
-                    .map(|g| ((g[0] - m[0]).powi(2) + (g[1] - m[1]).powi(2) + (g[2] - m[2]).powi(2)).sqrt())
+                    .map(|g| {
+                        ((g[0] - m[0]).powi(2) + (g[1] - m[1]).powi(2) + (g[2] - m[2]).powi(2))
+                            .sqrt()
+                    })
                     .fold(f64::INFINITY, f64::min);
                 assert!(closest < 0.05, "{cov:?}: mean {m:?} missed by {closest}");
             }
@@ -590,8 +659,20 @@ mod tests {
     #[test]
     fn truncation_barely_changes_the_fit() {
         let (pts, _) = sample_known(3000, 2);
-        let base = EmOptions { n_components: 12, max_iter: 20, tol: 0.0, ..Default::default() };
-        let exact = fit(&pts, &EmOptions { truncation: f64::INFINITY, ..base.clone() }).unwrap();
+        let base = EmOptions {
+            n_components: 12,
+            max_iter: 20,
+            tol: 0.0,
+            ..Default::default()
+        };
+        let exact = fit(
+            &pts,
+            &EmOptions {
+                truncation: f64::INFINITY,
+                ..base.clone()
+            },
+        )
+        .unwrap();
         let pruned = fit(&pts, &base).unwrap();
         let score = |g: &Gmm| g.log_pdf(&pts).unwrap().iter().sum::<f64>() / pts.len() as f64;
         assert!((score(&exact.gmm) - score(&pruned.gmm)).abs() < 1e-3);
@@ -600,7 +681,10 @@ mod tests {
     #[test]
     fn same_seed_same_fit_other_seed_differs() {
         let (pts, _) = sample_known(2000, 3);
-        let opts = EmOptions { n_components: 8, ..Default::default() };
+        let opts = EmOptions {
+            n_components: 8,
+            ..Default::default()
+        };
         let a = fit(&pts, &opts).unwrap();
         let b = fit(&pts, &opts).unwrap();
         assert_eq!(a.gmm, b.gmm);
@@ -611,8 +695,20 @@ mod tests {
     #[test]
     fn degenerate_inputs() {
         // Fewer distinct points than components, all on a plane: floor keeps covariances PD.
-        let pts = vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0], [0.0, 1.0, 1.0]];
-        let f = fit(&pts, &EmOptions { n_components: 10, ..Default::default() }).unwrap();
+        let pts = vec![
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        let f = fit(
+            &pts,
+            &EmOptions {
+                n_components: 10,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(f.gmm.len(), 3);
         assert!(f.gmm.covariances.iter().all(|c| c.cholesky().is_some()));
         assert!((f.gmm.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
@@ -624,9 +720,26 @@ mod tests {
     fn rejects_bad_input() {
         let o = EmOptions::default();
         assert_eq!(fit(&[], &o).unwrap_err(), CoreError::Empty);
-        assert_eq!(fit(&[[0.0, f64::INFINITY, 0.0]], &o).unwrap_err(), CoreError::NonFinite { row: 0 });
-        assert!(fit(&[[0.0; 3]], &EmOptions { n_components: 0, ..o.clone() }).is_err());
-        assert!(fit(&[[0.0; 3]], &EmOptions { reg_covar: 0.0, ..o.clone() }).is_err());
+        assert_eq!(
+            fit(&[[0.0, f64::INFINITY, 0.0]], &o).unwrap_err(),
+            CoreError::NonFinite { row: 0 }
+        );
+        assert!(fit(
+            &[[0.0; 3]],
+            &EmOptions {
+                n_components: 0,
+                ..o.clone()
+            }
+        )
+        .is_err());
+        assert!(fit(
+            &[[0.0; 3]],
+            &EmOptions {
+                reg_covar: 0.0,
+                ..o.clone()
+            }
+        )
+        .is_err());
         assert!(fit(&[[0.0; 3]], &EmOptions { tol: f64::NAN, ..o }).is_err());
     }
 }

@@ -17,12 +17,18 @@ impl fmt::Display for CoreError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CoreError::NonFinite { row } => {
-                write!(f, "points contain NaN or infinite values (first at row {row})")
+                write!(
+                    f,
+                    "points contain NaN or infinite values (first at row {row})"
+                )
             }
             CoreError::Empty => write!(f, "no points given"),
             CoreError::InvalidArgument(msg) => write!(f, "{msg}"),
             CoreError::NotPositiveDefinite { component } => {
-                write!(f, "covariance of component {component} is not positive-definite")
+                write!(
+                    f,
+                    "covariance of component {component} is not positive-definite"
+                )
             }
         }
     }

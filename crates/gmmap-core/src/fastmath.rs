@@ -2,7 +2,7 @@
 //! opaque call that blocks SIMD). Used on log-responsibilities shifted by their maximum.
 
 const LOG2E: f64 = std::f64::consts::LOG2_E;
-const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
+const LN2_HI: f64 = 6.931_471_803_691_238e-1;
 const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
 /// 1.5 * 2^52: adding it rounds to the nearest integer and leaves that integer in the low bits.
 const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
@@ -14,7 +14,7 @@ pub fn exp_nonpos(x: f64) -> f64 {
     let t = x * LOG2E + ROUND_MAGIC;
     let n = t - ROUND_MAGIC;
     let r = (x - n * LN2_HI) - n * LN2_LO; // |r| <= ln2 / 2
-    // Taylor series to degree 11: the truncation error is below 3e-15 on |r| <= 0.347.
+                                           // Taylor series to degree 11: the truncation error is below 3e-15 on |r| <= 0.347.
     let mut p = 1.0 / 39_916_800.0;
     p = p * r + 1.0 / 3_628_800.0;
     p = p * r + 1.0 / 362_880.0;
@@ -40,7 +40,10 @@ mod tests {
         let mut x = 0.0;
         while x > -745.0 {
             let (got, want) = (exp_nonpos(x), x.max(-700.0).exp());
-            assert!(((got - want) / want).abs() < 1e-13, "x={x} got={got} want={want}");
+            assert!(
+                ((got - want) / want).abs() < 1e-13,
+                "x={x} got={got} want={want}"
+            );
             x -= 0.0137;
         }
     }

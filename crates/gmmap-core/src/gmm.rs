@@ -24,7 +24,11 @@ pub(crate) const LOG_2PI_3: f64 = 3.0 * 1.837_877_066_409_345_5; // 3 ln(2π)
 impl Prepared {
     pub fn new(weight: f64, mean: [f64; 3], cov: &Sym3) -> Option<Self> {
         let (precision, logdet) = cov.inverse_logdet()?;
-        Some(Prepared { mean, precision, log_coef: weight.ln() - 0.5 * (LOG_2PI_3 + logdet) })
+        Some(Prepared {
+            mean,
+            precision,
+            log_coef: weight.ln() - 0.5 * (LOG_2PI_3 + logdet),
+        })
     }
 
     /// log(weight * N(x; mean, cov)).
@@ -54,7 +58,9 @@ impl Gmm {
 
     pub(crate) fn prepare(&self) -> Result<Vec<Prepared>, CoreError> {
         if self.is_empty() {
-            return Err(CoreError::InvalidArgument("the mixture has no components".into()));
+            return Err(CoreError::InvalidArgument(
+                "the mixture has no components".into(),
+            ));
         }
         (0..self.len())
             .map(|k| {
@@ -68,12 +74,14 @@ impl Gmm {
     pub fn log_pdf(&self, points: &[[f64; 3]]) -> Result<Vec<f64>, CoreError> {
         let comps = self.prepare()?;
         let mut out = vec![0.0; points.len()];
-        out.par_chunks_mut(CHUNK).zip(points.par_chunks(CHUNK)).for_each(|(out, pts)| {
-            let mut terms = vec![0.0; comps.len()];
-            for (o, x) in out.iter_mut().zip(pts) {
-                *o = log_sum_exp(&comps, x, &mut terms);
-            }
-        });
+        out.par_chunks_mut(CHUNK)
+            .zip(points.par_chunks(CHUNK))
+            .for_each(|(out, pts)| {
+                let mut terms = vec![0.0; comps.len()];
+                for (o, x) in out.iter_mut().zip(pts) {
+                    *o = log_sum_exp(&comps, x, &mut terms);
+                }
+            });
         Ok(out)
     }
 
@@ -81,16 +89,22 @@ impl Gmm {
     pub fn gradient(&self, points: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, CoreError> {
         let comps = self.prepare()?;
         let mut out = vec![[0.0; 3]; points.len()];
-        out.par_chunks_mut(CHUNK).zip(points.par_chunks(CHUNK)).for_each(|(out, pts)| {
-            for (o, x) in out.iter_mut().zip(pts) {
-                *o = comps.iter().fold([0.0; 3], |acc, c| {
-                    let d = sub(x, &c.mean);
-                    let density = (c.log_coef - 0.5 * c.precision.quad(d)).exp();
-                    let g = c.precision.mul_vec(d);
-                    [acc[0] - density * g[0], acc[1] - density * g[1], acc[2] - density * g[2]]
-                });
-            }
-        });
+        out.par_chunks_mut(CHUNK)
+            .zip(points.par_chunks(CHUNK))
+            .for_each(|(out, pts)| {
+                for (o, x) in out.iter_mut().zip(pts) {
+                    *o = comps.iter().fold([0.0; 3], |acc, c| {
+                        let d = sub(x, &c.mean);
+                        let density = (c.log_coef - 0.5 * c.precision.quad(d)).exp();
+                        let g = c.precision.mul_vec(d);
+                        [
+                            acc[0] - density * g[0],
+                            acc[1] - density * g[1],
+                            acc[2] - density * g[2],
+                        ]
+                    });
+                }
+            });
         Ok(out)
     }
 }
@@ -124,7 +138,14 @@ mod tests {
             means: vec![[0.0, 0.0, 0.0], [1.0, 2.0, -1.0]],
             covariances: vec![
                 Sym3::diag(0.5, 1.0, 2.0),
-                Sym3 { xx: 1.0, yy: 2.0, zz: 1.5, xy: 0.3, xz: -0.2, yz: 0.4 },
+                Sym3 {
+                    xx: 1.0,
+                    yy: 2.0,
+                    zz: 1.5,
+                    xy: 0.3,
+                    xz: -0.2,
+                    yz: 0.4,
+                },
             ],
         }
     }
@@ -132,7 +153,11 @@ mod tests {
     #[test]
     fn single_gaussian_log_pdf_at_mean_is_normaliser() {
         let cov = Sym3::diag(0.5, 1.0, 2.0);
-        let g = Gmm { weights: vec![1.0], means: vec![[1.0, 2.0, 3.0]], covariances: vec![cov] };
+        let g = Gmm {
+            weights: vec![1.0],
+            means: vec![[1.0, 2.0, 3.0]],
+            covariances: vec![cov],
+        };
         let lp = g.log_pdf(&[[1.0, 2.0, 3.0]]).unwrap()[0];
         assert!((lp - log_normaliser(&cov)).abs() < 1e-12);
     }
@@ -149,7 +174,11 @@ mod tests {
             b[axis] -= h;
             let p = g.log_pdf(&[a, b]).unwrap();
             let fd = (p[0].exp() - p[1].exp()) / (2.0 * h);
-            assert!((fd - grad[axis]).abs() < 1e-8, "axis {axis}: {fd} vs {}", grad[axis]);
+            assert!(
+                (fd - grad[axis]).abs() < 1e-8,
+                "axis {axis}: {fd} vs {}",
+                grad[axis]
+            );
         }
     }
 
@@ -157,6 +186,9 @@ mod tests {
     fn rejects_indefinite_covariance() {
         let mut g = two_component();
         g.covariances[1] = Sym3::diag(1.0, 0.0, 1.0);
-        assert_eq!(g.log_pdf(&[[0.0; 3]]), Err(CoreError::NotPositiveDefinite { component: 1 }));
+        assert_eq!(
+            g.log_pdf(&[[0.0; 3]]),
+            Err(CoreError::NotPositiveDefinite { component: 1 })
+        );
     }
 }

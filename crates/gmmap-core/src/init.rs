@@ -47,7 +47,9 @@ pub(crate) fn kmeans_pp(points: &[[f64; 3]], k: usize, rng: &mut Rng) -> Vec<[f6
         let candidates: Vec<[f64; 3]> = (0..trials)
             .map(|_| {
                 let target = rng.uniform() * total;
-                let i = cumulative.partition_point(|&c| c <= target).min(pts.len() - 1);
+                let i = cumulative
+                    .partition_point(|&c| c <= target)
+                    .min(pts.len() - 1);
                 pts[i]
             })
             .collect();
@@ -69,7 +71,10 @@ pub(crate) fn kmeans_pp(points: &[[f64; 3]], k: usize, rng: &mut Rng) -> Vec<[f6
             .map(|(_, t)| candidates[t])
             .expect("at least two trials");
         if best_is_new(&centres, &best) {
-            closest.par_iter_mut().zip(&pts).for_each(|(d, p)| *d = d.min(dist2(p, &best)));
+            closest
+                .par_iter_mut()
+                .zip(&pts)
+                .for_each(|(d, p)| *d = d.min(dist2(p, &best)));
             centres.push(best);
         } else {
             break;
@@ -119,7 +124,12 @@ mod tests {
 
     #[test]
     fn kmeans_pp_stops_at_distinct_points() {
-        let pts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let pts = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+        ];
         let c = kmeans_pp(&pts, 10, &mut Rng::new(0));
         assert_eq!(c.len(), 2);
         assert_eq!(random_points(&pts, 10, &mut Rng::new(0)).len(), 2);
@@ -132,7 +142,11 @@ mod tests {
         let pts: Vec<[f64; 3]> = (0..300)
             .map(|i| {
                 let b = blobs[i % 3];
-                [b[0] + rng.uniform(), b[1] + rng.uniform(), b[2] + rng.uniform()]
+                [
+                    b[0] + rng.uniform(),
+                    b[1] + rng.uniform(),
+                    b[2] + rng.uniform(),
+                ]
             })
             .collect();
         let c = kmeans_pp(&pts, 3, &mut Rng::new(1));

@@ -13,16 +13,30 @@ pub struct Sym3 {
 
 impl Sym3 {
     pub fn diag(x: f64, y: f64, z: f64) -> Self {
-        Sym3 { xx: x, yy: y, zz: z, ..Default::default() }
+        Sym3 {
+            xx: x,
+            yy: y,
+            zz: z,
+            ..Default::default()
+        }
     }
 
     /// From a row-major 3x3 matrix; the upper triangle is used.
     pub fn from_rows(m: &[f64]) -> Self {
-        Sym3 { xx: m[0], xy: m[1], xz: m[2], yy: m[4], yz: m[5], zz: m[8] }
+        Sym3 {
+            xx: m[0],
+            xy: m[1],
+            xz: m[2],
+            yy: m[4],
+            yz: m[5],
+            zz: m[8],
+        }
     }
 
     pub fn to_rows(self) -> [f64; 9] {
-        [self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz]
+        [
+            self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz,
+        ]
     }
 
     pub fn is_diagonal(&self) -> bool {
@@ -30,7 +44,12 @@ impl Sym3 {
     }
 
     pub fn add_diag(self, v: f64) -> Self {
-        Sym3 { xx: self.xx + v, yy: self.yy + v, zz: self.zz + v, ..self }
+        Sym3 {
+            xx: self.xx + v,
+            yy: self.yy + v,
+            zz: self.zz + v,
+            ..self
+        }
     }
 
     pub fn det(&self) -> f64 {
@@ -101,7 +120,14 @@ mod tests {
 
     #[test]
     fn inverse_times_matrix_is_identity() {
-        let m = Sym3 { xx: 4.0, yy: 3.0, zz: 2.0, xy: 0.5, xz: -0.3, yz: 0.2 };
+        let m = Sym3 {
+            xx: 4.0,
+            yy: 3.0,
+            zz: 2.0,
+            xy: 0.5,
+            xz: -0.3,
+            yz: 0.2,
+        };
         let (inv, logdet) = m.inverse_logdet().unwrap();
         let (a, b) = (m.to_rows(), inv.to_rows());
         for i in 0..3 {

@@ -62,7 +62,10 @@ pub fn voxel_filter(points: &[[f64; 3]], voxel_size: f64) -> Result<Vec<[f64; 3]
         }
         *n += 1;
     }
-    Ok(sums.into_iter().map(|(s, n)| s.map(|v| v / n as f64)).collect())
+    Ok(sums
+        .into_iter()
+        .map(|(s, n)| s.map(|v| v / n as f64))
+        .collect())
 }
 
 #[cfg(test)]
@@ -71,7 +74,12 @@ mod tests {
 
     #[test]
     fn one_centroid_per_voxel_in_first_seen_order() {
-        let pts = [[0.01, 0.01, 0.01], [0.5, 0.5, 0.5], [0.03, 0.05, 0.07], [-0.01, 0.0, 0.0]];
+        let pts = [
+            [0.01, 0.01, 0.01],
+            [0.5, 0.5, 0.5],
+            [0.03, 0.05, 0.07],
+            [-0.01, 0.0, 0.0],
+        ];
         let out = voxel_filter(&pts, 0.1).unwrap();
         assert_eq!(out.len(), 3);
         assert!((out[0][0] - 0.02).abs() < 1e-12 && (out[0][2] - 0.04).abs() < 1e-12);
@@ -83,7 +91,10 @@ mod tests {
     fn rejects_bad_input() {
         assert!(voxel_filter(&[[0.0; 3]], 0.0).is_err());
         assert!(voxel_filter(&[[0.0; 3]], f64::NAN).is_err());
-        assert_eq!(voxel_filter(&[[0.0, f64::NAN, 0.0]], 0.1), Err(CoreError::NonFinite { row: 0 }));
+        assert_eq!(
+            voxel_filter(&[[0.0, f64::NAN, 0.0]], 0.1),
+            Err(CoreError::NonFinite { row: 0 })
+        );
         assert!(voxel_filter(&[[1e300, 0.0, 0.0]], 1e-3).is_err());
         assert!(voxel_filter(&[], 0.1).unwrap().is_empty());
     }

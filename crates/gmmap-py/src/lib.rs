@@ -40,7 +40,11 @@ fn gmm_of(
     })
 }
 
-type GmmArrays<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray3<f64>>);
+type GmmArrays<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray3<f64>>,
+);
 
 fn gmm_to_arrays<'py>(py: Python<'py>, g: &Gmm) -> PyResult<GmmArrays<'py>> {
     let covs: Vec<f64> = g.covariances.iter().flat_map(|c| c.to_rows()).collect();
@@ -83,8 +87,15 @@ fn fit_em<'py>(
         truncation,
     };
     let pts = points_of(&points)?;
-    let fit = py.detach(|| gmmap_core::fit(&pts, &opts)).map_err(value_error)?;
-    Ok((gmm_to_arrays(py, &fit.gmm)?, fit.n_iter, fit.converged, fit.log_likelihood))
+    let fit = py
+        .detach(|| gmmap_core::fit(&pts, &opts))
+        .map_err(value_error)?;
+    Ok((
+        gmm_to_arrays(py, &fit.gmm)?,
+        fit.n_iter,
+        fit.converged,
+        fit.log_likelihood,
+    ))
 }
 
 /// log p(x) of every point under the mixture.
@@ -123,7 +134,9 @@ fn voxel_filter<'py>(
     voxel_size: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_of(&points)?;
-    let out = py.detach(|| gmmap_core::voxel_filter(&pts, voxel_size)).map_err(value_error)?;
+    let out = py
+        .detach(|| gmmap_core::voxel_filter(&pts, voxel_size))
+        .map_err(value_error)?;
     to_array2(py, &out)
 }
 

@@ -35,7 +35,7 @@ INTRINSICS = {
 
 
 def intrinsics_for(root: Path) -> Intrinsics:
-    """Picks the fr1/fr2/fr3 calibration from a folder name such as ``rgbd_dataset_freiburg1_xyz``."""
+    """The fr1/fr2/fr3 calibration named by a folder such as ``rgbd_dataset_freiburg1_xyz``."""
     name = root.resolve().name.lower()
     for key in INTRINSICS:
         if key in name or f"freiburg{key[-1]}" in name:
@@ -169,7 +169,7 @@ class TumRgbd(Sequence):
                 f"{self.root}: no depth frame has a ground-truth pose within {max_dt} s"
             )
         self.stamps = stamps[keep]
-        self.files = [self.root / r[1] for r, k in zip(rows, keep) if k]
+        self.files = [self.root / r[1] for r, k in zip(rows, keep, strict=True) if k]
         self.gt_poses = gt_poses[match[keep]]
 
     def __len__(self) -> int:

@@ -1,0 +1,40 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.points import voxel_filter
+
+SHARED_DATA = Path(
+    os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
+)
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """../shared/data (real recordings); tests that need it skip on a fresh user machine."""
+    if not (SHARED_DATA / "README.md").is_file():
+        pytest.skip(f"real recordings not found at {SHARED_DATA} (set GMMAP_SHARED_DATA)")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def slice_points() -> np.ndarray:
+    """The bundled TUM fr1_xyz slice in the world frame, voxelised at 3 cm."""
+    seq = TumRgbd(BUNDLED_TUM_SLICE, stride=2)
+    return voxel_filter(np.concatenate([f.world_points() for f in seq]), 0.03)
+
+
+def known_mixture_samples(n: int, seed: int = 0):
+    """Samples of a 3-component mixture with full covariances, and its parameters."""
+    rng = np.random.default_rng(seed)
+    weights = np.array([0.5, 0.3, 0.2])
+    means = np.array([[0.0, 0.0, 0.0], [3.0, 0.5, 1.0], [-1.0, 4.0, -2.0]])
+    A = rng.normal(size=(3, 3, 3)) * 0.3
+    covs = A @ A.transpose(0, 2, 1) + 0.05 * np.eye(3)
+    comp = rng.choice(3, size=n, p=weights)
+    z = rng.standard_normal((n, 3))
+    pts = means[comp] + np.einsum("nij,nj->ni", np.linalg.cholesky(covs)[comp], z)
+    return pts, weights, means, covs

@@ -1,0 +1,45 @@
+import json
+
+from click.testing import CliRunner
+
+from gmmap import __version__
+from gmmap.cli import main
+
+
+def run(*args):
+    result = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def test_help_and_version():
+    assert "demo" in run("--help").output and "bench" in run("--help").output
+    assert __version__ in run("--version").output
+    assert "--scaling" in run("bench", "em", "--help").output
+
+
+def test_demo_reports_a_fit_of_real_frames():
+    r = json.loads(run("demo", "--components", "30", "--json").stdout)
+    assert r["frames"] == 8 and r["points"] > 10_000 and r["components"] == 30
+    assert r["gmm_float32_bytes"] == 30 * 28
+    assert r["points_float32_bytes"] == 12 * r["points"]
+    assert r["log_likelihood"] > -5
+
+
+def test_bench_em_compares_with_sklearn():
+    r = json.loads(
+        run(
+            "bench",
+            "em",
+            "--points",
+            "3000",
+            "--components",
+            "10",
+            "--iterations",
+            "5",
+            "--repeats",
+            "1",
+            "--json",
+        ).stdout
+    )
+    assert r["points"] == 3000 and r["sklearn"]["time_s"] > 0 and r["speedup"] > 0
