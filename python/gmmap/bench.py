@@ -114,19 +114,18 @@ def em_comparison(
 
 
 _CHILD = """
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 import gmmap
 pts = np.load(sys.argv[1]); k = int(sys.argv[2]); cov = sys.argv[3]; iters = int(sys.argv[4])
-def rss_kb():
-    with open('/proc/self/statm') as f:
-        return int(f.read().split()[1]) * resource.getpagesize() // 1024
-before = rss_kb()
+def status_kb(field):  # VmHWM is the peak of this process image (ru_maxrss survives exec)
+    with open('/proc/self/status') as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(field))
+before = status_kb('VmRSS:')
 t = time.perf_counter()
 g = gmmap.fit_gmm(pts, k, cov, max_iter=iters, tol=0.0)
 t = time.perf_counter() - t
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print(json.dumps({"time_s": t, "peak_extra_mb": max(0, peak - before) / 1024}))
+print(json.dumps({"time_s": t, "peak_extra_mb": max(0, status_kb('VmHWM:') - before) / 1024}))
 """
 
 

@@ -366,25 +366,27 @@ fn dims_for(lo: [f64; 3], hi: [f64; 3], cell: f64) -> [u64; 3] {
     [0, 1, 2].map(|a| ((hi[a] - lo[a]) / cell).floor() as u64 + 1)
 }
 
-/// The largest cell (halving in volume each step) whose occupied count reaches `target`.
+/// The cell edge at which about `target` cells are occupied. Occupancy grows as cell^-D with
+/// the scene's dimension D (about 2 for the surfaces sensors see), measured at two sizes.
 fn choose_cell_size(pts: &[[f64; 3]], lo: [f64; 3], extent: f64, target: usize) -> f64 {
     if extent <= 0.0 {
         return 1.0;
     }
-    let hi = [lo[0] + extent, lo[1] + extent, lo[2] + extent];
-    let mut cell = extent / 4.0;
-    loop {
-        let next = cell / 2f64.cbrt();
-        let d = dims_for(lo, hi, next);
-        if (d[0] * d[1] * d[2]) as usize > MAX_CELLS || occupied(pts, lo, cell) >= target {
-            return cell;
-        }
-        cell = next;
-    }
+    let coarse = extent / 8.0;
+    let fine = coarse / 2.0;
+    let (a, b) = (
+        occupied(pts, lo, coarse) as f64,
+        occupied(pts, lo, fine) as f64,
+    );
+    let dim = (b / a).log2().clamp(1.0, 3.0);
+    let cell = fine * (b / target as f64).powf(1.0 / dim);
+    // At most cbrt(MAX_CELLS) cells along any axis, so dense cell ids stay small.
+    cell.max(extent / (MAX_CELLS as f64).cbrt())
 }
 
+/// Occupied cells of edge `cell`, counted in a hashed bitmap (collisions undercount a little).
 fn occupied(pts: &[[f64; 3]], lo: [f64; 3], cell: f64) -> usize {
-    let bits = 1usize << 24; // a hashed bitmap: collisions only undercount slightly
+    let bits = (8 * pts.len()).next_power_of_two().clamp(1 << 16, 1 << 24);
     let mut map = vec![0u64; bits / 64];
     let mut count = 0;
     for p in pts {
@@ -392,12 +394,10 @@ fn occupied(pts: &[[f64; 3]], lo: [f64; 3], cell: f64) -> usize {
         let h = (i(0).wrapping_mul(0x9E37_79B9_7F4A_7C15)
             ^ i(1).wrapping_mul(0xC2B2_AE3D_27D4_EB4F))
             ^ i(2).wrapping_mul(0x1656_67B1_9E37_79F9);
-        let h = (h >> 20) as usize % bits;
+        let h = (h >> 20) as usize & (bits - 1);
         let (w, b) = (h / 64, 1u64 << (h % 64));
-        if map[w] & b == 0 {
-            map[w] |= b;
-            count += 1;
-        }
+        count += (map[w] & b == 0) as usize;
+        map[w] |= b;
     }
     count
 }

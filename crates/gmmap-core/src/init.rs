@@ -29,58 +29,79 @@ fn subsample(points: &[[f64; 3]], limit: usize, rng: &mut Rng) -> Vec<[f64; 3]> 
 
 /// Greedy k-means++: each new centre is the best of 2 + ln k candidates drawn ∝ D².
 /// Returns fewer than `k` centres when there are fewer distinct points.
+///
+/// Two parallel passes per centre over fixed chunks (so sums, and the result, do not depend on
+/// the thread count): one updates the nearest-centre distances and totals them per chunk, one
+/// scores all candidates. Candidates are drawn chunk first, then within the chunk.
 pub(crate) fn kmeans_pp(points: &[[f64; 3]], k: usize, rng: &mut Rng) -> Vec<[f64; 3]> {
     let pts = subsample(points, MAX_SEED_POINTS.max(50 * k), rng);
     let trials = 2 + (k as f64).ln() as usize;
     let mut centres = vec![pts[rng.below(pts.len())]];
-    let mut closest: Vec<f64> = pts.par_iter().map(|p| dist2(p, &centres[0])).collect();
-    let mut cumulative = vec![0.0; pts.len()];
+    let mut closest = vec![f64::INFINITY; pts.len()];
     while centres.len() < k {
-        let mut total = 0.0;
-        for (c, d) in cumulative.iter_mut().zip(&closest) {
-            total += d;
-            *c = total;
-        }
+        let newest = *centres.last().expect("one centre at least");
+        let totals: Vec<f64> = closest
+            .par_chunks_mut(CHUNK)
+            .zip(pts.par_chunks(CHUNK))
+            .map(|(d, p)| {
+                let mut lanes = [0.0; 4];
+                for (i, (di, x)) in d.iter_mut().zip(p).enumerate() {
+                    *di = di.min(dist2(x, &newest));
+                    lanes[i % 4] += *di;
+                }
+                (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+            })
+            .collect();
+        let total: f64 = totals.iter().sum();
         if total <= 0.0 {
             break; // every point coincides with a centre
         }
         let candidates: Vec<[f64; 3]> = (0..trials)
-            .map(|_| {
-                let target = rng.uniform() * total;
-                let i = cumulative
-                    .partition_point(|&c| c <= target)
-                    .min(pts.len() - 1);
-                pts[i]
-            })
+            .map(|_| pts[draw(&closest, &totals, rng.uniform() * total)])
             .collect();
-        // Potential of each candidate, summed chunk by chunk in a fixed order (deterministic).
-        let partial: Vec<Vec<f64>> = pts
+        let scores: Vec<Vec<f64>> = closest
             .par_chunks(CHUNK)
-            .zip(closest.par_chunks(CHUNK))
-            .map(|(p, d)| {
-                candidates
-                    .iter()
-                    .map(|c| p.iter().zip(d).map(|(x, &dx)| dx.min(dist2(x, c))).sum())
-                    .collect()
-            })
+            .zip(pts.par_chunks(CHUNK))
+            .map(|(d, p)| candidates.iter().map(|c| potential(d, p, c)).collect())
             .collect();
-        let potential = |t: usize| partial.iter().map(|v| v[t]).sum::<f64>();
+        let score = |t: usize| scores.iter().map(|s| s[t]).sum::<f64>();
         let best = (0..trials)
-            .map(|t| (potential(t), t))
+            .map(|t| (score(t), t))
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, t)| candidates[t])
             .expect("at least two trials");
-        if best_is_new(&centres, &best) {
-            closest
-                .par_iter_mut()
-                .zip(&pts)
-                .for_each(|(d, p)| *d = d.min(dist2(p, &best)));
-            centres.push(best);
-        } else {
+        if !best_is_new(&centres, &best) {
             break;
         }
+        centres.push(best);
     }
     centres
+}
+
+/// The index where the running sum of `weights` passes `target`, found chunk by chunk.
+fn draw(weights: &[f64], chunk_totals: &[f64], mut target: f64) -> usize {
+    for (c, &t) in chunk_totals.iter().enumerate() {
+        if target < t {
+            for (i, &w) in weights[c * CHUNK..].iter().enumerate() {
+                target -= w;
+                if target < 0.0 {
+                    return c * CHUNK + i;
+                }
+            }
+        }
+        target -= t;
+    }
+    // Rounding left the target past the end: take the last point with weight.
+    weights.iter().rposition(|&w| w > 0.0).unwrap_or(0)
+}
+
+/// Σᵢ min(dᵢ, |xᵢ − c|²): the k-means potential of a chunk if `c` became a centre.
+fn potential(d: &[f64], p: &[[f64; 3]], c: &[f64; 3]) -> f64 {
+    let mut lanes = [0.0; 4];
+    for (i, (&di, x)) in d.iter().zip(p).enumerate() {
+        lanes[i % 4] += di.min(dist2(x, c));
+    }
+    (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
 }
 
 fn best_is_new(centres: &[[f64; 3]], c: &[f64; 3]) -> bool {
