@@ -9,6 +9,7 @@ mod fastmath;
 pub mod gmm;
 mod init;
 pub mod linalg;
+pub mod raycast;
 pub mod rng;
 pub mod voxel;
 

@@ -2,6 +2,7 @@
 //! Argument checking with friendly messages lives in the Python layer; errors that reach this
 //! far become `ValueError`.
 
+use gmmap_core::raycast::{Pinhole, Scene, Shape};
 use gmmap_core::{CoreError, CovType, EmOptions, Gmm, InitMethod, Sym3};
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -140,11 +141,102 @@ fn voxel_filter<'py>(
     to_array2(py, &out)
 }
 
+fn pose_of(pose: &PyReadonlyArray2<'_, f64>) -> PyResult<[f64; 16]> {
+    let flat = pose.as_slice()?;
+    <[f64; 16]>::try_from(flat).map_err(|_| PyValueError::new_err("pose must be a 4x4 matrix"))
+}
+
+/// A world of primitives prepared for ray casting (a BVH over yawed boxes and cylinders).
+#[pyclass(frozen, module = "gmmap._core")]
+struct RayScene {
+    scene: Scene,
+}
+
+#[pymethods]
+impl RayScene {
+    /// boxes: (M, 7) rows cx cy cz hx hy hz yaw; cylinders: (C, 5) rows x y radius z_min z_max.
+    #[new]
+    fn new(
+        boxes: PyReadonlyArray2<'_, f64>,
+        cylinders: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Self> {
+        let (b, c) = (boxes.as_slice()?, cylinders.as_slice()?);
+        if boxes.shape()[1] != 7 || cylinders.shape()[1] != 5 {
+            return Err(PyValueError::new_err(
+                "boxes must be (M, 7) and cylinders (C, 5)",
+            ));
+        }
+        let mut shapes: Vec<Shape> = b
+            .chunks_exact(7)
+            .map(|r| Shape::Box {
+                centre: [r[0], r[1], r[2]],
+                half: [r[3], r[4], r[5]],
+                yaw: r[6],
+            })
+            .collect();
+        shapes.extend(c.chunks_exact(5).map(|r| Shape::Cylinder {
+            x: r[0],
+            y: r[1],
+            radius: r[2],
+            z_min: r[3],
+            z_max: r[4],
+        }));
+        Ok(RayScene {
+            scene: Scene::new(shapes),
+        })
+    }
+
+    fn __len__(&self) -> usize {
+        self.scene.len()
+    }
+
+    /// (height, width) float32 z-depth image; 0 where nothing is hit within max_depth.
+    #[allow(clippy::too_many_arguments)]
+    fn depth_image<'py>(
+        &self,
+        py: Python<'py>,
+        pose: PyReadonlyArray2<'py, f64>,
+        fx: f64,
+        fy: f64,
+        cx: f64,
+        cy: f64,
+        width: usize,
+        height: usize,
+        max_depth: f64,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let pose = pose_of(&pose)?;
+        let cam = Pinhole {
+            fx,
+            fy,
+            cx,
+            cy,
+            width,
+            height,
+        };
+        let img = py.detach(|| self.scene.depth_image(&pose, &cam, max_depth));
+        PyArray1::from_vec(py, img).reshape([height, width])
+    }
+
+    /// Range along each sensor-frame unit direction (NaN where nothing is hit).
+    fn ranges<'py>(
+        &self,
+        py: Python<'py>,
+        pose: PyReadonlyArray2<'py, f64>,
+        dirs: PyReadonlyArray2<'py, f64>,
+        max_range: f64,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (pose, dirs) = (pose_of(&pose)?, points_of(&dirs)?);
+        let out = py.detach(|| self.scene.ranges(&pose, &dirs, max_range));
+        Ok(PyArray1::from_vec(py, out))
+    }
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_em, m)?)?;
     m.add_function(wrap_pyfunction!(log_pdf, m)?)?;
     m.add_function(wrap_pyfunction!(gradient, m)?)?;
     m.add_function(wrap_pyfunction!(voxel_filter, m)?)?;
+    m.add_class::<RayScene>()?;
     Ok(())
 }

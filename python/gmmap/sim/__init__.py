@@ -1,0 +1,23 @@
+"""The multi-robot simulator: worlds of primitives, ray-cast sensors, robots with odometry."""
+
+from gmmap.sim.robots import Motion, route_poses
+from gmmap.sim.run import SimRobot, simulate, write_run, write_tum
+from gmmap.sim.sensors import DepthCamera, Lidar
+from gmmap.sim.world import Box, Cylinder, World
+from gmmap.sim.worlds import WORLDS, get_world
+
+__all__ = [
+    "WORLDS",
+    "Box",
+    "Cylinder",
+    "DepthCamera",
+    "Lidar",
+    "Motion",
+    "SimRobot",
+    "World",
+    "get_world",
+    "route_poses",
+    "simulate",
+    "write_run",
+    "write_tum",
+]

@@ -1,0 +1,59 @@
+"""Robot motion along a route: rotate in place towards each waypoint, then drive to it."""
+
+from __future__ import annotations
+
+import math
+from itertools import pairwise
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Motion:
+    """How robots move: ``speed`` (m/s), ``turn_rate`` (rad/s), sensor ``rate`` (Hz), and a
+    full turn in place at the start (``spin``) so each robot first sees its whole room."""
+
+    speed: float = 0.5
+    turn_rate: float = 0.8
+    rate: float = 5.0
+    spin: bool = True
+
+
+def route_poses(route: list[tuple[float, float]], motion: Motion) -> np.ndarray:
+    """(M, 4, 4) body→world poses sampled at ``motion.rate`` along the route (z = 0)."""
+    if len(route) < 2:
+        raise ValueError("a route needs at least two waypoints")
+    keys = _keyframes(np.asarray(route, dtype=np.float64), motion)
+    t = np.arange(0.0, keys[-1, 0] + 1e-9, 1.0 / motion.rate)
+    x, y, yaw = (np.interp(t, keys[:, 0], keys[:, i]) for i in (1, 2, 3))
+    poses = np.tile(np.eye(4), (len(t), 1, 1))
+    c, s = np.cos(yaw), np.sin(yaw)
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c
+    poses[:, 0, 3], poses[:, 1, 3] = x, y
+    return poses
+
+
+def _keyframes(route: np.ndarray, motion: Motion) -> np.ndarray:
+    """Rows (t, x, y, yaw) where motion changes: turns in place and straight drives."""
+    t, (x, y) = 0.0, route[0]
+    yaw = _heading(route[0], route[1])
+    keys = [(t, x, y, yaw)]
+    if motion.spin:
+        t += 2 * math.pi / motion.turn_rate
+        yaw += 2 * math.pi
+        keys.append((t, x, y, yaw))
+    for a, b in pairwise(route):
+        turn = (_heading(a, b) - yaw + math.pi) % (2 * math.pi) - math.pi
+        if abs(turn) > 1e-9:
+            t += abs(turn) / motion.turn_rate
+            yaw += turn
+            keys.append((t, x, y, yaw))
+        t += float(np.linalg.norm(b - a)) / motion.speed
+        x, y = b
+        keys.append((t, x, y, yaw))
+    return np.array(keys)
+
+
+def _heading(a: np.ndarray, b: np.ndarray) -> float:
+    return math.atan2(b[1] - a[1], b[0] - a[0])
