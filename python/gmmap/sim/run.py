@@ -144,9 +144,11 @@ def write_run(
     out: str | Path,
     seed: int,
     progress: Callable[[str, int, int], None] | None = None,
+    **info: object,
 ) -> dict:
     """Writes every robot's folder, the world file and ``sim.json`` (the run's metadata,
-    including each robot's map→world transform: the ground truth the robots do not know)."""
+    including each robot's map→world transform: the ground truth the robots do not know).
+    Keyword arguments are recorded in sim.json too (e.g. the drift parameters)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for r in run:
@@ -157,6 +159,7 @@ def write_run(
         "world": run[0].world.name,
         "seed": seed,
         "sensor": type(run[0].sensor).__name__,
+        **info,
         "robots": [
             {"name": r.name, "frames": len(r), "map_to_world": r.map_to_world.tolist()} for r in run
         ],
