@@ -2,8 +2,17 @@ import numpy as np
 import pytest
 
 from gmmap import FileFormatError
-from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.datasets.tum import associate, quaternion_to_matrix
+from gmmap.datasets import BUNDLED_TUM_SLICE, Drift, TumRgbd
+from gmmap.datasets.trajectory import write_trajectory
+from gmmap.datasets.tum import (
+    Intrinsics,
+    associate,
+    depth_to_points,
+    quaternion_to_matrix,
+    read_depth,
+    read_table,
+    read_trajectory,
+)
 
 
 def test_bundled_slice_loads_with_ground_truth():
@@ -45,3 +54,125 @@ def test_full_fr1_xyz_recording(shared_data):
     path = np.linalg.norm(np.diff([f[:3, 3] for f in seq.gt_poses], axis=0), axis=1).sum()
     assert 5.0 < path < 10.0  # fr1_xyz: about 7 m of hand-held motion
     assert len(seq[len(seq) - 1].points) > 1000
+
+
+def test_fr1_xyz_association_by_hand(shared_data):
+    root = shared_data / "tum_fr1_xyz"
+    seq = TumRgbd(root, stride=8)
+    # 798 depth frames; the motion capture has a gap from 108.8357 to 108.9458 s, so the two
+    # depth frames inside it (108.867534, 108.903540) have no pose within 20 ms.
+    assert len(seq) == 796
+    assert 1305031108.867534 not in seq.stamps and 1305031108.90354 not in seq.stamps
+    # Depth 102.160407 lies 4.6 ms after ground-truth line 102.1558 and 5.4 ms before 102.1658.
+    assert seq.stamps[0] == 1305031102.160407
+    np.testing.assert_allclose(seq.gt_poses[0][:3, 3], [1.3452, 0.6273, 1.6627])
+    R = quaternion_to_matrix(np.array([[0.6582, 0.6109, -0.2950, -0.3265]]))[0]
+    np.testing.assert_allclose(seq.gt_poses[0][:3, :3], R)
+    np.testing.assert_array_equal(seq.poses, seq.gt_poses)  # no odometry: pose = ground truth
+    assert seq.format == "tum" and seq[-1].stamp == seq.stamps[-1]
+
+
+def test_bundled_slice_association_and_sequence_protocol():
+    seq = TumRgbd(BUNDLED_TUM_SLICE, stride=8)
+    listed = [float(r[0]) for r in read_table(BUNDLED_TUM_SLICE / "depth.txt", 2)]
+    np.testing.assert_array_equal(seq.stamps, listed)
+    gt_stamps, gt_poses = read_trajectory(BUNDLED_TUM_SLICE / "groundtruth.txt")
+    for stamp, pose in zip(seq.stamps, seq.gt_poses, strict=True):
+        nearest = np.argmin(np.abs(gt_stamps - stamp))
+        assert abs(gt_stamps[nearest] - stamp) <= 0.02
+        np.testing.assert_array_equal(pose, gt_poses[nearest])
+    frames = list(seq)
+    assert len(frames) == len(seq) == 8
+    assert seq[-1].stamp == frames[7].stamp and seq[-8].stamp == frames[0].stamp
+    assert [f.stamp for f in seq[::3]] == [frames[i].stamp for i in (0, 3, 6)]
+    assert seq[np.int64(2)].stamp == frames[2].stamp
+    with pytest.raises(IndexError):
+        seq[8]
+    with pytest.raises(IndexError):
+        seq[-9]
+
+
+def test_back_projection_by_hand():
+    K = Intrinsics(fx=500.0, fy=400.0, cx=1.0, cy=0.5)
+    depth = np.array([[0, 5000, 10000], [2500, 0, 60000]], dtype=np.uint16)
+    pts = depth_to_points(depth, K, depth_factor=5000.0, min_range=0.1, max_range=5.0)
+    # Valid pixels in row-major order: (u=1, v=0, z=1 m), (2, 0, 2 m), (0, 1, 0.5 m);
+    # 12 m at (2, 1) is beyond max_range. x = (u - cx) z / fx, y = (v - cy) z / fy.
+    expected = [
+        [0.0, -0.5 / 400, 1.0],
+        [1.0 * 2 / 500, -0.5 * 2 / 400, 2.0],
+        [-1.0 * 0.5 / 500, 0.5 * 0.5 / 400, 0.5],
+    ]
+    np.testing.assert_allclose(pts, expected, rtol=1e-6)
+
+
+def test_back_projected_real_pixel_by_hand():
+    seq = TumRgbd(BUNDLED_TUM_SLICE)
+    raw = read_depth(seq.files[0])
+    v, u = 240, 320
+    z = raw[v, u] / 5000.0
+    assert 0.1 < z < 5.0
+    # freiburg1: fx=517.3 fy=516.5 cx=318.6 cy=255.3
+    expected = [(u - 318.6) * z / 517.3, (v - 255.3) * z / 516.5, z]
+    pts = seq[0].points
+    row = np.flatnonzero((raw.astype(np.float32) / 5000 > 0.1) & (raw / 5000 < 5.0))
+    index = int(np.searchsorted(row, v * raw.shape[1] + u))
+    np.testing.assert_allclose(pts[index], expected, rtol=1e-5)
+
+
+def _copy_slice(dst, names=("depth.txt", "groundtruth.txt")):
+    for name in names:
+        (dst / name).write_text((BUNDLED_TUM_SLICE / name).read_text())
+    (dst / "depth").mkdir()
+    for png in (BUNDLED_TUM_SLICE / "depth").iterdir():
+        (dst / "depth" / png.name).write_bytes(png.read_bytes())
+
+
+def test_tum_folder_with_odometry_and_intrinsics(tmp_path):
+    _copy_slice(tmp_path)
+    seq = TumRgbd(BUNDLED_TUM_SLICE)
+    offset = np.eye(4)
+    offset[:3, 3] = [10.0, -2.0, 0.5]
+    odom = offset @ seq.gt_poses  # the robot's own map frame, shifted from the world
+    write_trajectory(tmp_path / "odometry.txt", seq.stamps + 0.001, odom)
+    (tmp_path / "intrinsics.txt").write_text("600 610 320 240\n")
+    sim = TumRgbd(tmp_path)  # the folder name names no camera: intrinsics.txt is used
+    assert sim.intrinsics == Intrinsics(600.0, 610.0, 320.0, 240.0)
+    assert len(sim) == 8
+    np.testing.assert_allclose(sim.poses, odom, atol=1e-8)
+    np.testing.assert_array_equal(sim.gt_poses, seq.gt_poses)
+    f = sim[3]
+    np.testing.assert_allclose(f.pose, odom[3], atol=1e-8)
+    np.testing.assert_array_equal(f.gt_pose, seq.gt_poses[3])
+    (tmp_path / "groundtruth.txt").unlink()  # odometry alone is enough; no ground truth then
+    assert TumRgbd(tmp_path).gt_poses is None and TumRgbd(tmp_path)[0].gt_pose is None
+
+
+def test_tum_drift_keeps_ground_truth():
+    truth = TumRgbd(BUNDLED_TUM_SLICE, stride=8)
+    seq = TumRgbd(BUNDLED_TUM_SLICE, stride=8, drift=Drift(translation=0.1, seed=3))
+    np.testing.assert_array_equal(seq.gt_poses, truth.gt_poses)
+    np.testing.assert_array_equal(seq.poses[0], truth.gt_poses[0])
+    assert np.linalg.norm(seq.poses[-1][:3, 3] - truth.gt_poses[-1][:3, 3]) > 1e-3
+    np.testing.assert_array_equal(seq[-1].gt_pose, truth.gt_poses[-1])
+    np.testing.assert_array_equal(seq[-1].pose, seq.poses[-1])
+
+
+def test_tum_errors_name_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"depth\.txt"):
+        TumRgbd(tmp_path, intrinsics=Intrinsics(1, 1, 0, 0))
+    _copy_slice(tmp_path)
+    (tmp_path / "groundtruth.txt").write_text("0.0 1 2 3 0 0 0 1\n")  # far from every frame
+    with pytest.raises(FileFormatError, match=r"no frame of depth\.txt has a pose"):
+        TumRgbd(tmp_path, intrinsics=Intrinsics(1, 1, 0, 0))
+    (tmp_path / "groundtruth.txt").write_text("0.0 1 2 3 0 0\n")
+    with pytest.raises(FileFormatError, match=r"groundtruth.txt:1: expected 8 fields"):
+        TumRgbd(tmp_path, intrinsics=Intrinsics(1, 1, 0, 0))
+    (tmp_path / "groundtruth.txt").unlink()
+    with pytest.raises(FileNotFoundError, match=r"groundtruth\.txt"):
+        TumRgbd(tmp_path, intrinsics=Intrinsics(1, 1, 0, 0))
+    (tmp_path / "sub").mkdir()
+    _copy_slice(tmp_path / "sub")  # a fresh folder with an intrinsics.txt that is too short
+    (tmp_path / "sub" / "intrinsics.txt").write_text("600 610\n")
+    with pytest.raises(FileFormatError, match=r"intrinsics\.txt"):
+        TumRgbd(tmp_path / "sub")

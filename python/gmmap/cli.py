@@ -241,7 +241,6 @@ def info(
 ) -> None:
     """Summarise a dataset: format, frames, duration, path length, points per frame."""
     from gmmap import datasets
-
     from gmmap.errors import GmmapError
 
     given = dict(stride=stride, topic=topic, odom_topic=odom_topic, voxel=voxel)

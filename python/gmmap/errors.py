@@ -15,3 +15,15 @@ class InvalidGmmError(GmmapError, ValueError):
 
 class FileFormatError(GmmapError, ValueError):
     """A file that is missing pieces, truncated or not in the expected format."""
+
+
+class UnknownFormatError(FileFormatError):
+    """A path that no dataset loader recognises (the message lists the supported formats)."""
+
+
+class TopicNotFoundError(InvalidInputError):
+    """A bag topic that is absent or of the wrong type; ``available`` maps topics to types."""
+
+    def __init__(self, message: str, available: dict[str, str] | None = None) -> None:
+        super().__init__(message)
+        self.available = dict(available or {})

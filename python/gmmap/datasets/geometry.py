@@ -1,0 +1,107 @@
+"""Small rigid-motion helpers shared by the loaders (numpy only: scipy is not a dependency).
+
+Quaternions are (qx, qy, qz, qw), the order of TUM files and ROS messages.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(M, 4) quaternions as (qx, qy, qz, qw), normalised here, → (M, 3, 3) rotations."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    ).transpose(2, 0, 1)
+
+
+def make_poses(translations: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
+    """(M, 3) translations and (M, 4) quaternions → (M, 4, 4) rigid transforms."""
+    poses = np.tile(np.eye(4), (len(translations), 1, 1))
+    poses[:, :3, :3] = quaternion_to_matrix(quaternions)
+    poses[:, :3, 3] = translations
+    return poses
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of rigid (..., 4, 4) transforms (exact: Rᵀ, not a general inverse)."""
+    R, t = T[..., :3, :3], T[..., :3, 3]
+    out = np.zeros_like(T)
+    out[..., :3, :3] = np.swapaxes(R, -1, -2)
+    out[..., :3, 3] = -np.einsum("...ji,...j->...i", R, t)
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """(M, 3) rotation vectors (axis × angle) → (M, 3, 3) rotations (Rodrigues)."""
+    w = np.asarray(w, dtype=np.float64).reshape(-1, 3)
+    theta = np.linalg.norm(w, axis=1)
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K -= K.transpose(0, 2, 1)
+    # Taylor series near 0 keeps the coefficients finite for tiny angles.
+    small = theta < 1e-8
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta**2 / 6, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(safe)) / safe**2)
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def rotation_angle(R: np.ndarray) -> np.ndarray:
+    """(M, 3, 3) rotations → (M,) rotation angles in [0, π]."""
+    trace = np.trace(np.asarray(R).reshape(-1, 3, 3), axis1=1, axis2=2)
+    return np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0))
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Spherical interpolation between (M, 4) unit quaternions at fractions (M,) in [0, 1]."""
+    dot = np.sum(q0 * q1, axis=1)
+    # q and -q are one rotation: flip to take the short way round.
+    q1 = np.where(dot[:, None] < 0, -q1, q1)
+    dot = np.abs(dot)
+    omega = np.arccos(np.clip(dot, -1.0, 1.0))
+    near = omega < 1e-6  # nearly equal: linear interpolation is exact to rounding
+    s = np.where(near, 1.0, np.sin(omega))
+    w0 = np.where(near, 1 - a, np.sin((1 - a) * omega) / s)
+    w1 = np.where(near, a, np.sin(a * omega) / s)
+    q = w0[:, None] * q0 + w1[:, None] * q1
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def interpolate_poses(
+    stamps: np.ndarray, translations: np.ndarray, quaternions: np.ndarray, query: np.ndarray
+) -> np.ndarray:
+    """Poses at ``query`` stamps, linear in translation and slerp in rotation.
+
+    ``stamps`` must be sorted; every query must lie within [stamps[0], stamps[-1]] (the caller
+    drops the others: extrapolating odometry would invent motion).
+    """
+    stamps = np.asarray(stamps, dtype=np.float64)
+    query = np.asarray(query, dtype=np.float64)
+    if len(stamps) == 1:
+        return make_poses(
+            np.repeat(translations, len(query), 0), np.repeat(quaternions, len(query), 0)
+        )
+    right = np.clip(np.searchsorted(stamps, query, side="right"), 1, len(stamps) - 1)
+    left = right - 1
+    span = stamps[right] - stamps[left]
+    a = np.clip(np.where(span > 0, (query - stamps[left]) / np.where(span > 0, span, 1), 0), 0, 1)
+    t = translations[left] + a[:, None] * (translations[right] - translations[left])
+    q0 = quaternions[left] / np.linalg.norm(quaternions[left], axis=1, keepdims=True)
+    q1 = quaternions[right] / np.linalg.norm(quaternions[right], axis=1, keepdims=True)
+    return make_poses(t, slerp(q0, q1, a))
+
+
+def path_length(poses: np.ndarray) -> float:
+    """Length of the polyline through the poses' positions, in metres."""
+    if len(poses) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
