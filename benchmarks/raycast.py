@@ -36,17 +36,26 @@ def measure(frames: int) -> dict:
             render(p)
         return len(poses) / (time.perf_counter() - start)
 
-    tiled = fps(lambda p: scene.depth_image(p, cam.fx, cam.fy, cam.cx, cam.cy, cam.width,
-                                            cam.height, cam.max_depth))
+    tiled = fps(
+        lambda p: scene.depth_image(
+            p, cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height, cam.max_depth
+        )
+    )
     per_ray = fps(lambda p: scene.ranges(p, rays, cam.max_depth))
     rng = np.random.default_rng(0)
     sensor = fps(lambda p: cam.render(world, p, rng))
-    a = scene.depth_image(poses[3], cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height,
-                          cam.max_depth)
+    a = scene.depth_image(
+        poses[3], cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height, cam.max_depth
+    )
     b = np.nan_to_num(scene.ranges(poses[3], rays, cam.max_depth)).reshape(a.shape)
-    return {"fps_tiled": tiled, "fps_per_ray": per_ray, "speedup": tiled / per_ray,
-            "fps_sensor_with_noise": sensor, "frames": len(poses),
-            "same_image": bool(np.array_equal(a, b.astype(np.float32)))}
+    return {
+        "fps_tiled": tiled,
+        "fps_per_ray": per_ray,
+        "speedup": tiled / per_ray,
+        "fps_sensor_with_noise": sensor,
+        "frames": len(poses),
+        "same_image": bool(np.array_equal(a, b.astype(np.float32))),
+    }
 
 
 def main() -> None:
@@ -60,8 +69,13 @@ def main() -> None:
     result = {"world": "office", "width": 640, "height": 480, "cpus": os.cpu_count()}
     for key, threads in (("one_core", "1"), ("all_cores", str(os.cpu_count()))):
         env = dict(os.environ, RAYON_NUM_THREADS=threads)
-        out = subprocess.run([sys.executable, __file__, "--child", "--frames", str(args.frames)],
-                             env=env, check=True, capture_output=True, text=True)
+        out = subprocess.run(
+            [sys.executable, __file__, "--child", "--frames", str(args.frames)],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+        )
         result[key] = json.loads(out.stdout)
     print(json.dumps(result, indent=2))
 

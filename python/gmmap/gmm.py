@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import os
-import tempfile
-import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from gmmap import _core
 from gmmap.errors import FileFormatError, InvalidGmmError, InvalidInputError
+from gmmap.fileio import load_npz, save_npz
 from gmmap.points import as_points
 
-FILE_FORMAT = "gmmap.gmm"
+FILE_FORMAT = "gmmap GMM"
 FILE_VERSION = 1
 
 
@@ -71,9 +69,11 @@ class Gmm:
 
     @property
     def float32_bytes(self) -> int:
-        """Size as float32: weight, mean and 3 variances (diagonal) or 6 covariance entries."""
-        per_component = 1 + 3 + (3 if self.is_diagonal else 6)
-        return 4 * per_component * len(self)
+        """Size as float32: per component a weight, a mean, and 3 variances when its covariance
+        is axis-aligned or 6 covariance entries otherwise."""
+        off = self.covariances[:, [0, 0, 1], [1, 2, 2]]
+        full = int(np.count_nonzero(np.any(off != 0.0, axis=1)))
+        return 4 * (7 * len(self) + 3 * full)
 
     def __repr__(self) -> str:
         kind = "diagonal" if self.is_diagonal else "full"
@@ -124,47 +124,43 @@ class Gmm:
         covs = 0.5 * (covs + covs.transpose(0, 2, 1))  # exact symmetry despite rounding
         return Gmm(self.weights, self.means @ R.T + t, covs)
 
+    def l2_inner(self, other: Gmm) -> float:
+        """∫ f g dx with the other mixture, in closed form."""
+        return float(
+            _core.l2_inner(
+                self.weights,
+                self.means,
+                self.covariances,
+                other.weights,
+                other.means,
+                other.covariances,
+            )
+        )
+
+    def l2_correlation(self, other: Gmm) -> float:
+        """Normalised L2 correlation ∫fg / sqrt(∫f² ∫g²) in [0, 1] (1 only for f = g): how
+        well two mixtures agree, independent of their component counts."""
+        return self.l2_inner(other) / np.sqrt(self.l2_inner(self) * other.l2_inner(other))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"weights": self.weights, "means": self.means, "covariances": self.covariances}
+
     def save(self, path: str | os.PathLike) -> None:
         """Writes the mixture to ``path`` (npz); atomic, so a crash never leaves half a file."""
-        path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(
-                    f,
-                    format=np.array(FILE_FORMAT),
-                    version=np.array(FILE_VERSION),
-                    weights=self.weights,
-                    means=self.means,
-                    covariances=self.covariances,
-                )
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        save_npz(path, FILE_FORMAT, FILE_VERSION, self.arrays())
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Gmm:
         """Reads a mixture written by ``save``; raises FileFormatError on anything else."""
+        return cls.from_arrays(load_npz(path, FILE_FORMAT, FILE_VERSION), path)
+
+    @classmethod
+    def from_arrays(cls, data: dict, source: object = "data") -> Gmm:
+        """The mixture in ``data``'s weights/means/covariances; FileFormatError if invalid."""
         try:
-            with np.load(path, allow_pickle=False) as data:
-                fmt = str(data["format"]) if "format" in data else None
-                if fmt != FILE_FORMAT:
-                    raise FileFormatError(f"{path}: not a gmmap GMM file")
-                version = int(data["version"])
-                if version != FILE_VERSION:
-                    raise FileFormatError(f"{path}: unsupported GMM file version {version}")
-                arrays = [data[k] for k in ("weights", "means", "covariances")]
-        except FileNotFoundError:
-            raise
-        except (zipfile.BadZipFile, OSError, EOFError, KeyError, ValueError) as exc:
-            if isinstance(exc, FileFormatError):
-                raise
-            raise FileFormatError(f"{path}: unreadable GMM file ({exc})") from exc
-        try:
-            return cls(*arrays)
-        except InvalidGmmError as exc:
-            raise FileFormatError(f"{path}: {exc}") from exc
+            return cls(data["weights"], data["means"], data["covariances"])
+        except (KeyError, InvalidGmmError) as exc:
+            raise FileFormatError(f"{source}: {exc}") from exc
 
 
 def _validated(weights: object, means: object, covariances: object):

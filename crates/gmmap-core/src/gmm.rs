@@ -109,6 +109,37 @@ impl Gmm {
     }
 }
 
+impl Gmm {
+    /// ∫ f(x) g(x) dx in closed form: Σᵢⱼ πᵢ ρⱼ N(μᵢ; νⱼ, Σᵢ + Λⱼ).
+    pub fn l2_inner(&self, other: &Gmm) -> Result<f64, CoreError> {
+        if self.is_empty() || other.is_empty() {
+            return Err(CoreError::InvalidArgument(
+                "the mixture has no components".into(),
+            ));
+        }
+        let rows: Vec<f64> = (0..self.len())
+            .into_par_iter()
+            .map(|i| {
+                (0..other.len())
+                    .map(|j| {
+                        let cov = self.covariances[i].add(&other.covariances[j]);
+                        let w = self.weights[i] * other.weights[j];
+                        Prepared::new(w, other.means[j], &cov)
+                            .map_or(0.0, |p| p.log_term(&self.means[i]).exp())
+                    })
+                    .sum()
+            })
+            .collect();
+        Ok(rows.iter().sum())
+    }
+
+    /// The normalised L2 correlation ∫fg / sqrt(∫f² ∫g²), in [0, 1]; 1 only for f = g.
+    pub fn l2_correlation(&self, other: &Gmm) -> Result<f64, CoreError> {
+        let fg = self.l2_inner(other)?;
+        Ok(fg / (self.l2_inner(self)? * other.l2_inner(other)?).sqrt())
+    }
+}
+
 /// log Σₖ exp(log_termₖ(x)), stable for any spread of terms.
 pub(crate) fn log_sum_exp(comps: &[Prepared], x: &[f64; 3], terms: &mut [f64]) -> f64 {
     let mut max = f64::NEG_INFINITY;
@@ -180,6 +211,40 @@ mod tests {
                 grad[axis]
             );
         }
+    }
+
+    #[test]
+    fn l2_inner_matches_numeric_integral_and_correlation_is_one_for_itself() {
+        let g = two_component();
+        // ∫ g² by summing p(x)² over a fine grid.
+        let h = 0.1;
+        let mut grid = Vec::new();
+        for i in -60..80 {
+            for j in -60..90 {
+                for k in -70..60 {
+                    grid.push([i as f64 * h, j as f64 * h, k as f64 * h]);
+                }
+            }
+        }
+        let numeric: f64 = g
+            .log_pdf(&grid)
+            .unwrap()
+            .iter()
+            .map(|l| (2.0 * l).exp())
+            .sum::<f64>()
+            * h
+            * h
+            * h;
+        let closed = g.l2_inner(&g).unwrap();
+        assert!(
+            (numeric - closed).abs() < 1e-4 * closed,
+            "{numeric} vs {closed}"
+        );
+        assert!((g.l2_correlation(&g).unwrap() - 1.0).abs() < 1e-12);
+        let mut moved = g.clone();
+        moved.means[0][0] += 0.5;
+        let c = g.l2_correlation(&moved).unwrap();
+        assert!(c < 1.0 && c > 0.5);
     }
 
     #[test]

@@ -11,13 +11,14 @@ mod init;
 pub mod linalg;
 pub mod raycast;
 pub mod rng;
+pub mod select;
 pub mod voxel;
 
 pub use em::{fit, CovType, EmOptions, EmResult, InitMethod};
 pub use error::CoreError;
 pub use gmm::Gmm;
 pub use linalg::Sym3;
-pub use voxel::voxel_filter;
+pub use voxel::{voxel_filter, VoxelBuffer};
 
 /// Rejects NaN or infinite coordinates, naming the first offending row.
 pub fn check_finite(points: &[[f64; 3]]) -> Result<(), CoreError> {

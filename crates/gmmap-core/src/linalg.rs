@@ -110,6 +110,98 @@ impl Sym3 {
     }
 }
 
+impl Sym3 {
+    /// Eigen-decomposition by cyclic Jacobi rotations: eigenvalues ascending and the matching
+    /// unit eigenvectors (returned as rows). Accurate to rounding for any symmetric input.
+    pub fn eigen(&self) -> ([f64; 3], [[f64; 3]; 3]) {
+        let mut a = [
+            [self.xx, self.xy, self.xz],
+            [self.xy, self.yy, self.yz],
+            [self.xz, self.yz, self.zz],
+        ];
+        let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        for _ in 0..50 {
+            let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+            let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+            if off <= 1e-300 || off <= f64::EPSILON * 1e-3 * scale {
+                break;
+            }
+            for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                // The rotation that zeroes a[p][q] (Golub & Van Loan, symmetric Schur).
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                // A ← Jᵀ A J: columns p, q first, then rows p, q.
+                for row in a.iter_mut() {
+                    let (x, y) = (row[p], row[q]);
+                    row[p] = c * x - s * y;
+                    row[q] = s * x + c * y;
+                }
+                let (rp, rq) = (a[p], a[q]);
+                a[p] = [0, 1, 2].map(|k| c * rp[k] - s * rq[k]);
+                a[q] = [0, 1, 2].map(|k| s * rp[k] + c * rq[k]);
+                for row in v.iter_mut() {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
+            }
+        }
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
+        let values = order.map(|i| a[i][i]);
+        let vectors = order.map(|i| [v[0][i], v[1][i], v[2][i]]);
+        (values, vectors)
+    }
+
+    /// tr(A B) of two symmetric matrices.
+    pub fn trace_product(&self, b: &Sym3) -> f64 {
+        self.xx * b.xx
+            + self.yy * b.yy
+            + self.zz * b.zz
+            + 2.0 * (self.xy * b.xy + self.xz * b.xz + self.yz * b.yz)
+    }
+
+    pub fn add(&self, b: &Sym3) -> Sym3 {
+        Sym3 {
+            xx: self.xx + b.xx,
+            yy: self.yy + b.yy,
+            zz: self.zz + b.zz,
+            xy: self.xy + b.xy,
+            xz: self.xz + b.xz,
+            yz: self.yz + b.yz,
+        }
+    }
+
+    pub fn scale(&self, f: f64) -> Sym3 {
+        Sym3 {
+            xx: self.xx * f,
+            yy: self.yy * f,
+            zz: self.zz * f,
+            xy: self.xy * f,
+            xz: self.xz * f,
+            yz: self.yz * f,
+        }
+    }
+
+    /// d dᵀ.
+    pub fn outer(d: [f64; 3]) -> Sym3 {
+        Sym3 {
+            xx: d[0] * d[0],
+            yy: d[1] * d[1],
+            zz: d[2] * d[2],
+            xy: d[0] * d[1],
+            xz: d[0] * d[2],
+            yz: d[1] * d[2],
+        }
+    }
+}
+
 fn positive_sqrt(v: f64) -> Option<f64> {
     (v > 0.0 && v.is_finite()).then(|| v.sqrt())
 }
@@ -137,6 +229,29 @@ mod tests {
             }
         }
         assert!((logdet - m.det().ln()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn eigen_reconstructs_the_matrix() {
+        let m = Sym3 {
+            xx: 4.0,
+            yy: 3.0,
+            zz: 2.0,
+            xy: 0.5,
+            xz: -0.3,
+            yz: 0.2,
+        };
+        let (w, v) = m.eigen();
+        assert!(w[0] <= w[1] && w[1] <= w[2]);
+        let rows = m.to_rows();
+        for k in 0..3 {
+            for i in 0..3 {
+                let mv: f64 = (0..3).map(|j| rows[3 * i + j] * v[k][j]).sum();
+                assert!((mv - w[k] * v[k][i]).abs() < 1e-12);
+            }
+        }
+        let (w, _) = Sym3::diag(3.0, 1.0, 2.0).eigen();
+        assert_eq!(w, [1.0, 2.0, 3.0]);
     }
 
     #[test]

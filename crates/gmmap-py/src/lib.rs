@@ -3,6 +3,7 @@
 //! far become `ValueError`.
 
 use gmmap_core::raycast::{Pinhole, Scene, Shape};
+use gmmap_core::select::{select, SelectOptions};
 use gmmap_core::{CoreError, CovType, EmOptions, Gmm, InitMethod, Sym3};
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -10,6 +11,13 @@ use numpy::{
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+/// Runs `f` without the GIL on a rayon worker thread: the core's many short parallel loops
+/// (k-means++ runs two per centre) then start inside the pool instead of each waking it from
+/// outside, which costs tens of microseconds a time.
+fn in_pool<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+    py.detach(|| rayon::scope(|_| f()))
+}
 
 fn value_error(e: CoreError) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -88,9 +96,7 @@ fn fit_em<'py>(
         truncation,
     };
     let pts = points_of(&points)?;
-    let fit = py
-        .detach(|| gmmap_core::fit(&pts, &opts))
-        .map_err(value_error)?;
+    let fit = in_pool(py, || gmmap_core::fit(&pts, &opts)).map_err(value_error)?;
     Ok((
         gmm_to_arrays(py, &fit.gmm)?,
         fit.n_iter,
@@ -109,7 +115,7 @@ fn log_pdf<'py>(
     points: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let (g, pts) = (gmm_of(weights, means, covariances)?, points_of(&points)?);
-    let out = py.detach(|| g.log_pdf(&pts)).map_err(value_error)?;
+    let out = in_pool(py, || g.log_pdf(&pts)).map_err(value_error)?;
     Ok(PyArray1::from_vec(py, out))
 }
 
@@ -123,7 +129,7 @@ fn gradient<'py>(
     points: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let (g, pts) = (gmm_of(weights, means, covariances)?, points_of(&points)?);
-    let out = py.detach(|| g.gradient(&pts)).map_err(value_error)?;
+    let out = in_pool(py, || g.gradient(&pts)).map_err(value_error)?;
     to_array2(py, &out)
 }
 
@@ -135,10 +141,87 @@ fn voxel_filter<'py>(
     voxel_size: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let pts = points_of(&points)?;
-    let out = py
-        .detach(|| gmmap_core::voxel_filter(&pts, voxel_size))
-        .map_err(value_error)?;
+    let out = in_pool(py, || gmmap_core::voxel_filter(&pts, voxel_size)).map_err(value_error)?;
     to_array2(py, &out)
+}
+
+/// Model selection: (weights, means, covariances, labels).
+#[pyfunction]
+fn select_components<'py>(
+    py: Python<'py>,
+    weights: PyReadonlyArray1<'py, f64>,
+    means: PyReadonlyArray2<'py, f64>,
+    covariances: PyReadonlyArray3<'py, f64>,
+    flat_ratio: f64,
+    max_distance: f64,
+    kl_threshold: f64,
+) -> PyResult<(GmmArrays<'py>, Bound<'py, PyArray1<usize>>)> {
+    let g = gmm_of(weights, means, covariances)?;
+    let opts = SelectOptions {
+        flat_ratio,
+        max_distance,
+        kl_threshold,
+    };
+    let s = in_pool(py, || select(&g, &opts)).map_err(value_error)?;
+    Ok((gmm_to_arrays(py, &s.gmm)?, PyArray1::from_vec(py, s.labels)))
+}
+
+/// ∫ f g dx of two mixtures.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn l2_inner<'py>(
+    py: Python<'py>,
+    w1: PyReadonlyArray1<'py, f64>,
+    m1: PyReadonlyArray2<'py, f64>,
+    c1: PyReadonlyArray3<'py, f64>,
+    w2: PyReadonlyArray1<'py, f64>,
+    m2: PyReadonlyArray2<'py, f64>,
+    c2: PyReadonlyArray3<'py, f64>,
+) -> PyResult<f64> {
+    let (f, g) = (gmm_of(w1, m1, c1)?, gmm_of(w2, m2, c2)?);
+    in_pool(py, || f.l2_inner(&g)).map_err(value_error)
+}
+
+/// A submap's point buffer: voxel cells with exact centroids (see gmmap-core).
+#[pyclass(module = "gmmap._core")]
+struct VoxelBuffer {
+    inner: gmmap_core::VoxelBuffer,
+}
+
+#[pymethods]
+impl VoxelBuffer {
+    #[new]
+    fn new(voxel_size: f64) -> PyResult<Self> {
+        Ok(VoxelBuffer {
+            inner: gmmap_core::VoxelBuffer::new(voxel_size).map_err(value_error)?,
+        })
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// Offers float32 (N, 3) points moved by the 4x4 `transform`: (distinct, new, accepted).
+    fn offer(
+        &mut self,
+        py: Python<'_>,
+        points: PyReadonlyArray2<'_, f32>,
+        transform: PyReadonlyArray2<'_, f64>,
+        min_novelty: f64,
+    ) -> PyResult<(usize, usize, bool)> {
+        if points.shape()[1] != 3 {
+            return Err(PyValueError::new_err("points must have shape (N, 3)"));
+        }
+        let t = pose_of(&transform)?;
+        let t: [f64; 12] = t[..12].try_into().expect("12 of 16");
+        let pts = points.as_slice()?;
+        let inner = &mut self.inner;
+        in_pool(py, || inner.offer(pts, &t, min_novelty)).map_err(value_error)
+    }
+
+    fn centroids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        to_array2(py, &self.inner.centroids())
+    }
 }
 
 fn pose_of(pose: &PyReadonlyArray2<'_, f64>) -> PyResult<[f64; 16]> {
@@ -213,7 +296,7 @@ impl RayScene {
             width,
             height,
         };
-        let img = py.detach(|| self.scene.depth_image(&pose, &cam, max_depth));
+        let img = in_pool(py, || self.scene.depth_image(&pose, &cam, max_depth));
         PyArray1::from_vec(py, img).reshape([height, width])
     }
 
@@ -226,7 +309,7 @@ impl RayScene {
         max_range: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (pose, dirs) = (pose_of(&pose)?, points_of(&dirs)?);
-        let out = py.detach(|| self.scene.ranges(&pose, &dirs, max_range));
+        let out = in_pool(py, || self.scene.ranges(&pose, &dirs, max_range));
         Ok(PyArray1::from_vec(py, out))
     }
 }
@@ -238,5 +321,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradient, m)?)?;
     m.add_function(wrap_pyfunction!(voxel_filter, m)?)?;
     m.add_class::<RayScene>()?;
+    m.add_class::<VoxelBuffer>()?;
+    m.add_function(wrap_pyfunction!(select_components, m)?)?;
+    m.add_function(wrap_pyfunction!(l2_inner, m)?)?;
     Ok(())
 }

@@ -1,0 +1,266 @@
+"""GMM submaps (paper IV-A): frames gathered in a point buffer, one mixture per submap.
+
+A `SubmapBuilder` (the paper's PtBuffer) moves each frame by its odometry pose into the
+submap's anchor frame (the first frame's pose, turned upright when the map frame's ``up`` is
+known) and adds it to a voxel buffer (exact centroids, 5 cm by default). A frame that would add
+too few new voxels (``min_novelty``) is skipped. After F accepted frames the submap is fitted
+and its components selected. Strategies:
+
+- ``points`` (the paper's Point-to-GMM, default): one GMM fitted to the buffered points.
+- ``gmm-merge`` (the earlier baseline): one GMM per frame with K / F components, the frames'
+  mixtures concatenated with equal weight per frame.
+- ``per-frame`` (no submap): every accepted frame becomes a submap of its own.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from gmmap import _core
+from gmmap.datasets.frame import Frame
+from gmmap.em import fit_gmm
+from gmmap.errors import InvalidInputError
+from gmmap.fileio import load_npz, save_npz
+from gmmap.gmm import Gmm
+from gmmap.points import voxel_filter
+from gmmap.select import SelectOptions, select_components
+
+STRATEGIES = ("points", "gmm-merge", "per-frame")
+FILE_FORMAT = "gmmap submap"
+FILE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """How submaps are built (see the module docstring)."""
+
+    frames_per_submap: int = 40
+    voxel_size: float = 0.05
+    strategy: str = "points"
+    n_components: int = 100
+    covariance: str = "diag"
+    min_novelty: float = 0.05  # fraction of a frame's voxels that must be new
+    select: bool = True
+    selection: SelectOptions = field(default_factory=SelectOptions)
+    holdout: float = 0.0  # fraction of buffered points withheld from fitting, for evaluation
+    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # map frame's up; None: no levelling
+    max_iter: int = 100
+    tol: float = 1e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise InvalidInputError(f"strategy must be one of {STRATEGIES}, got {self.strategy!r}")
+        if self.frames_per_submap < 1:
+            raise InvalidInputError("frames_per_submap must be >= 1")
+        if not 0.0 <= self.holdout < 1.0 or not 0.0 <= self.min_novelty <= 1.0:
+            raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
+
+
+@dataclass
+class Submap:
+    """One robot's submap: a GMM in its anchor frame, where the anchor sits in the robot's map.
+
+    ``points`` (the buffered voxel centroids, anchor frame) stay on the robot: they are for
+    baselines and evaluation and are never sent. ``gt_anchor`` is the anchor's ground-truth pose
+    in the dataset's world frame when the frames carry one.
+    """
+
+    robot: str
+    seq: int
+    anchor: np.ndarray
+    stamps: np.ndarray
+    n_points: int
+    gmm: Gmm
+    points: np.ndarray | None = None
+    gt_anchor: np.ndarray | None = None
+    stats: dict = field(default_factory=dict)
+
+    def save(self, path: str | os.PathLike, with_points: bool = True) -> None:
+        arrays = dict(
+            self.gmm.arrays(),
+            robot=np.array(self.robot),
+            seq=np.array(self.seq),
+            anchor=self.anchor,
+            stamps=self.stamps,
+            n_points=np.array(self.n_points),
+            stats=np.array(json.dumps(self.stats)),
+        )
+        if self.gt_anchor is not None:
+            arrays["gt_anchor"] = self.gt_anchor
+        if with_points and self.points is not None:
+            arrays["points"] = self.points.astype(np.float32)
+        save_npz(path, FILE_FORMAT, FILE_VERSION, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Submap:
+        d = load_npz(path, FILE_FORMAT, FILE_VERSION)
+        return cls(
+            str(d["robot"]),
+            int(d["seq"]),
+            d["anchor"],
+            d["stamps"],
+            int(d["n_points"]),
+            Gmm.from_arrays(d, path),
+            d.get("points"),
+            d.get("gt_anchor"),
+            json.loads(str(d["stats"])),
+        )
+
+
+def level(pose: np.ndarray, up: np.ndarray | None) -> np.ndarray:
+    """The pose turned so its z axis is ``up`` and its x axis the pose's most horizontal axis."""
+    if up is None:
+        return pose.copy()
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    R = pose[:3, :3]
+    forward = R[:, int(np.argmin(np.abs(R.T @ up)))]
+    x = forward - (forward @ up) * up
+    x /= np.linalg.norm(x)
+    out = pose.copy()
+    out[:3, :3] = np.column_stack([x, np.cross(up, x), up])
+    return out
+
+
+class SubmapBuilder:
+    """Turns frames into submaps: call ``add`` per frame, ``flush`` at the end."""
+
+    def __init__(self, robot: str = "robot", options: BuildOptions | None = None) -> None:
+        self.robot = robot
+        self.options = options or BuildOptions()
+        self.seq = 0
+        self.frames_seen = 0
+        self.frames_skipped = 0
+        self._reset()
+
+    def _reset(self) -> None:
+        self.buffer = _core.VoxelBuffer(self.options.voxel_size)
+        self.anchor: np.ndarray | None = None
+        self.gt_anchor: np.ndarray | None = None
+        self.stamps: list[float] = []
+        self.frame_gmms: list[Gmm] = []
+        self.busy_s = 0.0
+
+    @property
+    def frames_per_submap(self) -> int:
+        o = self.options
+        return 1 if o.strategy == "per-frame" else o.frames_per_submap
+
+    def add(self, frame: Frame) -> Submap | None:
+        """Adds a frame; returns a finished submap when this frame completes one."""
+        start = time.perf_counter()
+        self.frames_seen += 1
+        if self.anchor is None:
+            self.anchor = level(frame.pose, self.options.up)
+            if frame.gt_pose is not None:
+                self.gt_anchor = frame.gt_pose @ np.linalg.inv(frame.pose) @ self.anchor
+        T = np.linalg.inv(self.anchor) @ frame.pose
+        points = np.ascontiguousarray(frame.points, dtype=np.float32)
+        novelty = self.options.min_novelty if len(self.buffer) else 0.0
+        try:
+            _, _, accepted = self.buffer.offer(points, T, novelty)
+        except ValueError as exc:
+            raise InvalidInputError(f"frame at {frame.stamp}: {exc}") from exc
+        if not accepted:
+            self.frames_skipped += 1
+            self.busy_s += time.perf_counter() - start
+            return None
+        self.stamps.append(frame.stamp)
+        if self.options.strategy == "gmm-merge":
+            self.frame_gmms.append(self._fit_frame(points, T))
+        self.busy_s += time.perf_counter() - start
+        return self._emit() if len(self.stamps) >= self.frames_per_submap else None
+
+    def flush(self) -> Submap | None:
+        """The partial submap of the frames added since the last one (None if there are none)."""
+        return self._emit() if self.stamps else None
+
+    def _fit_frame(self, points: np.ndarray, T: np.ndarray) -> Gmm:
+        o = self.options
+        local = points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+        k = max(1, o.n_components // o.frames_per_submap)
+        return fit_gmm(
+            voxel_filter(local, o.voxel_size), k, o.covariance, o.max_iter, o.tol, o.seed
+        )
+
+    def _emit(self) -> Submap:
+        o = self.options
+        start = time.perf_counter()
+        points = self.buffer.centroids()
+        rng = np.random.default_rng([o.seed, self.seq])
+        held = rng.random(len(points)) < o.holdout
+        train = points[~held] if (~held).sum() >= 1 else points
+        if o.strategy == "gmm-merge":
+            gmm = concatenate(self.frame_gmms)
+        else:
+            gmm = fit_gmm(train, o.n_components, o.covariance, o.max_iter, o.tol, o.seed)
+        before = gmm
+        if o.select:
+            gmm = select_components(gmm, o.selection)
+        stats = {
+            "frames": len(self.stamps),
+            "points": len(points),
+            "components_before": len(before),
+            "components_after": len(gmm),
+            "bytes_float32": gmm.float32_bytes,
+            "time_s": self.busy_s + time.perf_counter() - start,
+        }
+        if held.any():
+            stats["heldout_ll_before"] = before.score(points[held])
+            stats["heldout_ll_after"] = gmm.score(points[held])
+        submap = Submap(
+            self.robot,
+            self.seq,
+            self.anchor,
+            np.array(self.stamps),
+            len(points),
+            gmm,
+            points,
+            self.gt_anchor,
+            stats,
+        )
+        self.seq += 1
+        self._reset()
+        return submap
+
+
+def concatenate(gmms: list[Gmm]) -> Gmm:
+    """Mixtures joined with equal total weight each (the GMM-merge baseline's normalisation)."""
+    w = np.concatenate([g.weights / len(gmms) for g in gmms])
+    return Gmm(
+        w / w.sum(),
+        np.concatenate([g.means for g in gmms]),
+        np.concatenate([g.covariances for g in gmms]),
+    )
+
+
+def build_submaps(
+    frames: Iterable[Frame], robot: str = "robot", options: BuildOptions | None = None
+) -> Iterator[Submap]:
+    """Submaps of a frame sequence, the last partial one included."""
+    builder = SubmapBuilder(robot, options)
+    for frame in frames:
+        submap = builder.add(frame)
+        if submap is not None:
+            yield submap
+    last = builder.flush()
+    if last is not None:
+        yield last
+
+
+__all__ = [
+    "STRATEGIES",
+    "BuildOptions",
+    "Submap",
+    "SubmapBuilder",
+    "asdict",
+    "build_submaps",
+    "concatenate",
+    "level",
+]
