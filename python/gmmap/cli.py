@@ -6,10 +6,14 @@ import json
 import sys
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from gmmap import __version__
+
+if TYPE_CHECKING:  # the simulator is imported only by the commands that run it
+    from gmmap.sim import DepthCamera, Lidar
 
 
 def _log(msg: str) -> None:
@@ -64,14 +68,38 @@ def demo(components: int, voxel: float, covariance: str, as_json: bool) -> None:
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     required=True,
-    help="Output folder: one TUM-format folder per robot, world.json, sim.json.",
+    help="Output folder: one folder per robot (TUM RGB-D for depth, PLY scans for lidar), "
+    "world.json, sim.json.",
 )
 @click.option("--frames", "max_frames", type=int, help="Keep only each robot's first frames.")
 @click.option("--rate", default=5.0, show_default=True, help="Frames per second.")
 @click.option("--speed", default=0.5, show_default=True, help="Driving speed (m/s).")
-@click.option("--width", default=640, show_default=True, help="Depth image width (px).")
-@click.option("--height", default=480, show_default=True, help="Depth image height (px).")
-@click.option("--noise/--no-noise", default=True, show_default=True, help="Depth noise.")
+@click.option(
+    "--sensor",
+    type=click.Choice(["depth", "lidar"]),
+    default="depth",
+    show_default=True,
+    help="A depth camera (Kinect-like) or a spinning LiDAR (VLP-16-like).",
+)
+@click.option("--width", default=640, show_default=True, help="Depth: image width (px).")
+@click.option("--height", default=480, show_default=True, help="Depth: image height (px).")
+@click.option(
+    "--beams",
+    default=16,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Lidar: channels, spread over ±15° of elevation.",
+)
+@click.option(
+    "--lidar-range",
+    default=30.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Lidar: maximum range (m).",
+)
+@click.option(
+    "--noise/--no-noise", default=True, show_default=True, help="Sensor noise (depth or range)."
+)
 @click.option(
     "--drift-translation",
     default=0.02,
@@ -99,38 +127,37 @@ def sim(
     max_frames: int | None,
     rate: float,
     speed: float,
+    sensor: str,
     width: int,
     height: int,
+    beams: int,
+    lidar_range: float,
     noise: bool,
     drift_translation: float,
     drift_rotation: float,
     drift_turn: float,
     as_json: bool,
 ) -> None:
-    """Simulate robots with depth cameras in a world and write their recordings.
+    """Simulate robots with depth cameras or LiDARs in a world and write their recordings.
 
-    Each robot's folder reads back with `gmmap.datasets.open`: depth PNGs, ground truth in the
-    world frame, odometry (with the drift model of gmmap.datasets.drift) in the robot's own map
+    Each robot's folder reads back with `gmmap.datasets.open` (and `gmmap info`): depth PNGs in
+    a TUM RGB-D folder, or one PLY per LiDAR scan with poses.txt; ground truth in the world
+    frame, odometry (with the drift model of gmmap.datasets.drift) in the robot's own map
     frame. sim.json holds each robot's map→world transform, which the robots never see.
     """
     from gmmap import sim as s
     from gmmap.datasets.drift import Drift
 
     world = s.World.load(world_name) if world_name.endswith(".json") else s.get_world(world_name)
-    cam = s.DepthCamera(
-        width=width,
-        height=height,
-        fx=525.0 * width / 640,
-        fy=525.0 * height / 480,
-        cx=(width - 1) / 2,
-        cy=(height - 1) / 2,
-        noise=noise,
-    )
+    if sensor == "lidar":
+        device = _lidar(beams, lidar_range, noise)
+    else:
+        device = _depth_camera(width, height, noise)
     drift = Drift(
         translation=drift_translation, rotation_per_m=drift_rotation, rotation_per_rad=drift_turn
     )
     run = s.simulate(
-        world, robots, seed, cam, s.Motion(speed=speed, rate=rate), drift, max_frames=max_frames
+        world, robots, seed, device, s.Motion(speed=speed, rate=rate), drift, max_frames=max_frames
     )
     total = sum(len(r) for r in run)
     with click.progressbar(
@@ -144,6 +171,137 @@ def sim(
     else:
         for r in meta["robots"]:
             click.echo(f"{r['name']}: {r['frames']} frames → {out / r['name']}")
+
+
+def _depth_camera(width: int, height: int, noise: bool) -> DepthCamera:
+    """The default camera's field of view at another resolution."""
+    from gmmap.sim import DepthCamera
+
+    return DepthCamera(
+        width=width,
+        height=height,
+        fx=525.0 * width / 640,
+        fy=525.0 * height / 480,
+        cx=(width - 1) / 2,
+        cy=(height - 1) / 2,
+        noise=noise,
+    )
+
+
+def _lidar(beams: int, max_range: float, noise: bool) -> Lidar:
+    """The default LiDAR with ``beams`` channels over the same elevation span."""
+    from gmmap.sim import Lidar
+
+    return Lidar(beams=beams, max_range=max_range, noise_std=Lidar.noise_std if noise else 0.0)
+
+
+@main.command()
+@click.argument("path", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Output folder: one file per submap and index.json.",
+)
+@click.option("--robot", default="robot", show_default=True, help="The robot's name.")
+@click.option("--frames-per-submap", default=40, show_default=True, help="Frames per submap.")
+@click.option(
+    "--strategy",
+    type=click.Choice(["points", "gmm-merge", "per-frame"]),
+    default="points",
+    show_default=True,
+)
+@click.option("--components", default=100, show_default=True, help="Components fitted.")
+@click.option(
+    "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
+)
+@click.option("--voxel", default=0.05, show_default=True, help="Point-buffer voxel size (m).")
+@click.option(
+    "--novelty",
+    default=0.05,
+    show_default=True,
+    help="Skip frames whose new voxels are under this fraction of their voxels.",
+)
+@click.option(
+    "--select/--no-select", default=True, show_default=True, help="Adaptive model selection."
+)
+@click.option(
+    "--kl-threshold",
+    default=8.0,
+    show_default=True,
+    help="Selection: merge pairs whose symmetric KL divergence is below this.",
+)
+@click.option(
+    "--holdout",
+    default=0.1,
+    show_default=True,
+    help="Fraction of points withheld from fitting to score the submaps.",
+)
+@click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
+@click.option("--max-frames", type=int, help="Use only the first frames of the data.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def build(
+    path: Path,
+    out: Path,
+    robot: str,
+    frames_per_submap: int,
+    strategy: str,
+    components: int,
+    covariance: str,
+    voxel: float,
+    novelty: float,
+    select: bool,
+    kl_threshold: float,
+    holdout: float,
+    stride: int | None,
+    max_frames: int | None,
+    as_json: bool,
+) -> None:
+    """Build GMM submaps from a dataset (frames → point buffer → EM → model selection)."""
+    from gmmap import datasets
+    from gmmap.select import SelectOptions
+    from gmmap.submap import BuildOptions, build_submaps, write_submaps
+
+    frames = datasets.open(path, **({"stride": stride} if stride else {}))
+    n = min(len(frames), max_frames or len(frames))
+    options = BuildOptions(
+        frames_per_submap,
+        voxel,
+        strategy,
+        components,
+        covariance,
+        novelty,
+        select,
+        SelectOptions(kl_threshold=kl_threshold),
+        holdout,
+    )
+    with click.progressbar(
+        (frames[i] for i in range(n)),
+        length=n,
+        file=sys.stderr,
+        label=f"building submaps of {path}",
+    ) as bar:
+        submaps = list(build_submaps(bar, robot, options))
+    index = write_submaps(submaps, out, source=str(path), options=options)
+    if as_json:
+        click.echo(json.dumps({"submaps": index["submaps"]}))
+        return
+    click.echo(
+        f"{'seq':>4} {'frames':>6} {'points':>7} {'K before':>8} {'K after':>7} "
+        f"{'bytes':>6} {'held-out LL before → after':>27} {'time':>8}"
+    )
+    for s in index["submaps"]:
+        ll = (
+            "—"
+            if s["heldout_ll_before"] is None
+            else f"{s['heldout_ll_before']:+.4f} → {s['heldout_ll_after']:+.4f}"
+        )
+        click.echo(
+            f"{s['seq']:>4} {s['frames']:>6} {s['points']:>7} {s['components_before']:>8} "
+            f"{s['components_after']:>7} {s['bytes_float32']:>6} {ll:>27} "
+            f"{s['time_s'] * 1e3:>6.0f} ms"
+        )
+    click.echo(f"{len(submaps)} submaps → {out}")
 
 
 @main.group()
@@ -239,7 +397,14 @@ def info(
     sample: int,
     as_json: bool,
 ) -> None:
-    """Summarise a dataset: format, frames, duration, path length, points per frame."""
+    """Summarise a dataset: format, frames, duration, path length, points per frame.
+
+    PATH is detected as one of: a TUM RGB-D folder (depth.txt; also keyframe exports with
+    truth_cam_poses.txt, and `gmmap sim` depth runs), a KITTI odometry sequence, a folder of
+    PLY/PCD files with a TUM-format poses file (also `gmmap sim --sensor lidar` runs), or a
+    ROS 1/2 bag. The path length follows the poses the loader yields (the odometry where there
+    is one); the ground truth's is given too when the data has one.
+    """
     from gmmap import datasets
     from gmmap.errors import GmmapError
 
@@ -261,7 +426,8 @@ def info(
         f"frames          {r['frames']}\n"
         f"duration        {r['duration_s']:.2f} s\n"
         f"path length     {r['path_length_m']:.2f} m\n"
-        f"points / frame  {r['points_per_frame']:,.0f}{note}"
+        + (f"gt path length  {r['gt_path_length_m']:.2f} m\n" if "gt_path_length_m" in r else "")
+        + f"points / frame  {r['points_per_frame']:,.0f}{note}"
     )
 
 

@@ -18,7 +18,8 @@ import json
 import os
 import time
 from collections.abc import Iterable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, is_dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -254,13 +255,40 @@ def build_submaps(
         yield last
 
 
-__all__ = [
-    "STRATEGIES",
-    "BuildOptions",
-    "Submap",
-    "SubmapBuilder",
-    "asdict",
-    "build_submaps",
-    "concatenate",
-    "level",
-]
+def submap_path(out: Path, seq: int) -> Path:
+    return out / f"submap_{seq:06d}.npz"
+
+
+def write_submaps(submaps: list[Submap], out: str | os.PathLike, **info: object) -> dict:
+    """Writes each submap (points included: the folder is the robot's own) and ``index.json``
+    with the robot's name, each submap's statistics and ``info``; returns the index."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for s in submaps:
+        s.save(submap_path(out, s.seq))
+    keys = (
+        "frames",
+        "points",
+        "components_before",
+        "components_after",
+        "bytes_float32",
+        "heldout_ll_before",
+        "heldout_ll_after",
+        "time_s",
+    )
+    index = {
+        "robot": submaps[0].robot if submaps else None,
+        **{k: (asdict(v) if is_dataclass(v) else v) for k, v in info.items()},
+        "submaps": [{"seq": s.seq, **{k: s.stats.get(k) for k in keys}} for s in submaps],
+    }
+    (out / "index.json").write_text(json.dumps(index, indent=1))
+    return index
+
+
+def read_submaps(folder: str | os.PathLike) -> list[Submap]:
+    """The submaps of a folder written by ``write_submaps``, in sequence order."""
+    folder = Path(folder)
+    if not (folder / "index.json").is_file():
+        raise FileNotFoundError(f"{folder}: no index.json (not a submap folder from gmmap build)")
+    index = json.loads((folder / "index.json").read_text())
+    return [Submap.load(submap_path(folder, s["seq"])) for s in index["submaps"]]
