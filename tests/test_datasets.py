@@ -1,10 +1,12 @@
 import numpy as np
 import pytest
 
+import gmmap.datasets as datasets
 from gmmap import FileFormatError
 from gmmap.datasets import BUNDLED_TUM_SLICE, Drift, TumRgbd
 from gmmap.datasets.trajectory import write_trajectory
 from gmmap.datasets.tum import (
+    INTRINSICS,
     Intrinsics,
     associate,
     depth_to_points,
@@ -176,3 +178,53 @@ def test_tum_errors_name_the_file(tmp_path):
     (tmp_path / "sub" / "intrinsics.txt").write_text("600 610\n")
     with pytest.raises(FileFormatError, match=r"intrinsics\.txt"):
         TumRgbd(tmp_path / "sub")
+
+
+def voxel_overlap(a, b, size=0.05):
+    """Intersection over union of the voxels two point sets occupy."""
+    va, vb = (set(map(tuple, np.floor(p / size).astype(int))) for p in (a, b))
+    return len(va & vb) / len(va | vb)
+
+
+def test_fr3_cabinet_keyframes_pair_frame_i_with_pose_line_i(shared_data):
+    root = shared_data / "tum_fr3_cabinet_keyframes"
+    seq = datasets.open(root, stride=8)
+    assert isinstance(seq, TumRgbd) and seq.match == "order" and len(seq) == 58
+    assert seq.intrinsics == INTRINSICS["fr3"]  # from the folder name
+    # depth.txt lists depth_imgs/NNNN_depth_raw.png; the folder ships them in depth/.
+    assert seq.files[57] == root / "depth" / "0057_depth_raw.png"
+    # Line 3 of truth_cam_poses.txt: 1341841280.1825 -2.3319 1.1799 1.1107 (qx qy qz qw) ...
+    f = seq[2]
+    assert f.stamp == 1341841280.1825
+    np.testing.assert_allclose(f.gt_pose[:3, 3], [-2.3319, 1.1799, 1.1107])
+    q = np.array([[-0.4077, 0.8121, -0.3749, 0.1837]])
+    np.testing.assert_allclose(f.gt_pose[:3, :3], quaternion_to_matrix(q)[0])
+    np.testing.assert_array_equal(seq.poses, seq.gt_poses)
+    R = seq.gt_poses[:, :3, :3]
+    np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.tile(np.eye(3), (58, 1, 1)), atol=1e-9)
+    assert (np.diff(seq.stamps) > 0).all()
+    steps = np.linalg.norm(np.diff(seq.gt_poses[:, :3, 3], axis=0), axis=1)
+    assert steps.max() < 0.3 and 8.0 < steps.sum() < 8.6  # an 8.3 m loop in keyframe steps
+    # Camera→world: neighbouring keyframes see the same surfaces at the same world places.
+    a, b = seq[10], seq[11]
+    assert voxel_overlap(a.world_points(), b.world_points()) > 0.3
+    assert len(seq[57].points) > 1000
+
+
+def test_keyframe_folder_without_shared_data(tmp_path):
+    """The bundled slice rearranged as a keyframe export: numbered frames listed in a folder
+    that is not there, and poses by line in truth_cam_poses.txt."""
+    _copy_slice(tmp_path, names=())
+    truth = TumRgbd(BUNDLED_TUM_SLICE)
+    names = [p.name for p in truth.files]
+    listed = "".join(f"{i} depth_imgs/{n}\n" for i, n in enumerate(names))
+    (tmp_path / "depth.txt").write_text("# timestamp filename\n" + listed)
+    write_trajectory(tmp_path / "truth_cam_poses.txt", truth.stamps, truth.gt_poses)
+    seq = TumRgbd(tmp_path, intrinsics=truth.intrinsics)
+    assert seq.match == "order" and len(seq) == 8
+    np.testing.assert_allclose(seq.stamps, truth.stamps, atol=1e-6)
+    np.testing.assert_allclose(seq.gt_poses, truth.gt_poses, atol=1e-8)
+    np.testing.assert_array_equal(seq[5].points, truth[5].points)
+    (tmp_path / "depth.txt").write_text(listed + f"8 depth_imgs/{names[0]}\n")
+    with pytest.raises(FileFormatError, match=r"truth_cam_poses\.txt: 8 poses for 9 frames"):
+        TumRgbd(tmp_path, intrinsics=truth.intrinsics)

@@ -4,6 +4,7 @@ from gmmap.datasets.geometry import (
     interpolate_poses,
     invert,
     make_poses,
+    matrix_to_quaternion,
     path_length,
     quaternion_to_matrix,
     rotation_angle,
@@ -57,3 +58,27 @@ def test_invert_and_path_length():
         np.array([[0.0, 0, 0], [3.0, 4.0, 0], [3.0, 4.0, 1.0]]), np.tile([0, 0, 0, 1.0], (3, 1))
     )
     assert path_length(poses) == 6.0 and path_length(poses[:1]) == 0.0
+
+
+def random_rotations(n, seed=0):
+    """Uniform random rotations (normalised Gaussian quaternions), plus the hard cases: the
+    identity and half turns about each axis (qw = 0, where the trace pivot fails)."""
+    q = np.random.default_rng(seed).normal(size=(n, 4))
+    half_turns = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
+    near_half = axis_angle_quaternion([1, -2, 3], np.pi - 1e-7)[None]
+    return quaternion_to_matrix(np.concatenate([q, half_turns, near_half]))
+
+
+def test_matrix_quaternion_round_trip():
+    R = random_rotations(500)
+    q = matrix_to_quaternion(R)
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-12)
+    assert (q[:, 3] >= 0).all()  # one quaternion per rotation
+    np.testing.assert_allclose(quaternion_to_matrix(q), R, atol=1e-12)
+    # Back to the same quaternion up to sign, and a (3, 3) input is one rotation.
+    again = matrix_to_quaternion(quaternion_to_matrix(q))
+    np.testing.assert_allclose(np.abs(np.sum(again * q, axis=1)), 1.0, atol=1e-12)
+    np.testing.assert_allclose(matrix_to_quaternion(R[7]), q[7:8])
+    expected = axis_angle_quaternion([0.0, 0.0, 1.0], 1.0)
+    got = matrix_to_quaternion(quaternion_to_matrix(expected[None]))[0]
+    np.testing.assert_allclose(got, expected, atol=1e-15)

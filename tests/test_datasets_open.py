@@ -80,6 +80,19 @@ def test_info_json_on_kitti(shared_data):
     assert 110_000 < r["points_per_frame"] < 140_000
 
 
+def test_info_json_on_fr3_cabinet_keyframes(shared_data):
+    root = shared_data / "tum_fr3_cabinet_keyframes"
+    result = info(root, "--json", "--stride", "8", "--sample", "5")
+    assert result.exit_code == 0, result.output
+    r = json.loads(result.stdout)
+    assert set(r) >= INFO_KEYS
+    assert r["format"] == "tum" and r["frames"] == 58
+    assert r["duration_s"] == pytest.approx(38.4079, abs=1e-3)  # the pose stamps' span
+    assert r["path_length_m"] == pytest.approx(8.27, abs=0.01)  # the data README: an 8.3 m loop
+    assert r["gt_path_length_m"] == r["path_length_m"]
+    assert r["points_per_frame_sampled"] == 5 and r["points_per_frame"] > 1000
+
+
 def test_info_reports_bad_data_in_one_line(tmp_path):
     result = info(tmp_path)
     assert result.exit_code != 0

@@ -5,6 +5,7 @@ from gmmap import FileFormatError
 from gmmap.datasets import Drift, PointFiles
 from gmmap.datasets.pcd import read_pcd
 from gmmap.datasets.ply import read_ply
+from gmmap.datasets.ply import write_ply as write_ply_file
 
 
 def cloud(n: int = 200, seed: int = 0) -> np.ndarray:
@@ -151,6 +152,33 @@ def test_folder_by_line_order_and_options(tmp_path):
     (tmp_path / "trajectory.txt").unlink()
     with pytest.raises(FileNotFoundError, match=r"poses\.txt"):
         PointFiles(tmp_path)
+
+
+def test_folder_with_odometry_and_ground_truth(tmp_path):
+    stamps = [100.0, 100.2, 100.4]
+    for k, s in enumerate(stamps):
+        write_ply_file(tmp_path / f"{s:.6f}.ply", cloud(seed=k))
+    (tmp_path / "poses.txt").write_text(poses_along_x(stamps))
+    # The truth: twice as far along x, and sampled more densely than the scans.
+    truth = "".join(f"{s:.6f} {2 * i:.1f} 0 0 0 0 0 1\n" for i, s in enumerate(stamps))
+    (tmp_path / "groundtruth.txt").write_text(truth + "100.5 9 9 9 0 0 0 1\n")
+    seq = PointFiles(tmp_path)
+    assert seq.match == "stamp" and seq.gt_path == tmp_path / "groundtruth.txt"
+    np.testing.assert_allclose(seq[2].pose[:3, 3], [2.0, 0, 0])
+    np.testing.assert_allclose(seq[2].gt_pose[:3, 3], [4.0, 0, 0])
+    np.testing.assert_array_equal(seq[1].points, cloud(seed=1))
+    # Drift moves the odometry only; the ground truth stays the file's.
+    drifted = PointFiles(tmp_path, drift=Drift(translation=0.5, seed=1))
+    np.testing.assert_array_equal(drifted.gt_poses, seq.gt_poses)
+    # groundtruth.txt as the poses file leaves no second file for the truth.
+    assert PointFiles(tmp_path, poses="groundtruth.txt").gt_poses is None
+    (tmp_path / "truth_by_line.txt").write_text(truth)
+    by_line = PointFiles(tmp_path, groundtruth="truth_by_line.txt", match="order")
+    np.testing.assert_allclose(by_line.gt_poses, seq.gt_poses)
+    with pytest.raises(FileFormatError, match=r"groundtruth\.txt: 4 poses for 3 point files"):
+        PointFiles(tmp_path, match="order")
+    with pytest.raises(FileNotFoundError, match=r"nowhere\.txt: missing ground-truth file"):
+        PointFiles(tmp_path, groundtruth="nowhere.txt")
 
 
 def test_ply_elements_before_the_vertices(tmp_path):

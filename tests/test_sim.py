@@ -14,13 +14,16 @@ from gmmap.sim import (
     Cylinder,
     DepthCamera,
     Lidar,
+    Motion,
     World,
     get_world,
     simulate,
+    write_pointfiles,
     write_run,
 )
 
 SMALL_CAMERA = DepthCamera(width=160, height=120, fx=131.25, fy=131.25, cx=79.5, cy=59.5)
+SMALL_LIDAR = Lidar(beams=8, azimuth_steps=256)
 
 
 def scene(*shapes):
@@ -173,3 +176,79 @@ def test_sim_command(tmp_path):
     assert [r["frames"] for r in meta["robots"]] == [3, 3]
     assert len(datasets.open(tmp_path / "robot_1")) == 3
     assert isinstance(World.load(tmp_path / "world.json").scene, _core.RayScene)
+
+
+def test_lidar_sim_to_open_round_trip(tmp_path):
+    run = simulate(
+        get_world("office"), 2, seed=2, sensor=SMALL_LIDAR, max_frames=5, odometry=Drift()
+    )
+    meta = write_run(run, tmp_path, seed=2)
+    assert meta["sensor"] == "Lidar"
+    for robot in run:
+        seq = datasets.open(tmp_path / robot.name)
+        assert isinstance(seq, datasets.PointFiles) and seq.match == "stamp"
+        assert seq.gt_path == tmp_path / robot.name / "groundtruth.txt"
+        assert len(seq) == len(robot)
+        for i in (0, 4):
+            got, want = seq[i], robot[i]
+            assert got.stamp == pytest.approx(want.stamp, abs=1e-6)
+            # Written as float32 and read back as float32: the very same numbers.
+            assert got.points.dtype == np.float32 and len(got.points) > 1000
+            np.testing.assert_array_equal(got.points, want.points)
+            np.testing.assert_allclose(got.pose, want.pose, atol=1e-8)
+            np.testing.assert_allclose(got.gt_pose, want.gt_pose, atol=1e-8)
+        assert not np.allclose(seq.poses[-1], seq.gt_poses[-1])  # odometry is not the truth
+    first = sorted((tmp_path / "robot_0").glob("*.ply"))[0]
+    assert first.name == f"{run[0].stamps[0]:.6f}.ply"
+    assert first.read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
+
+
+def test_writers_refuse_the_other_sensor(tmp_path):
+    camera_robot = simulate(get_world("corner"), 1, sensor=SMALL_CAMERA, max_frames=1)[0]
+    with pytest.raises(InvalidInputError, match="use a Lidar"):
+        write_pointfiles(camera_robot, tmp_path)
+
+
+def route_length(world_name, robot):
+    """Length of the waypoint polyline a robot drives (the routes, then the routes reversed)."""
+    world = get_world(world_name)
+    route = np.array([*world.routes, *(list(reversed(r)) for r in world.routes)][robot])
+    return float(np.linalg.norm(np.diff(route, axis=0), axis=1).sum())
+
+
+@pytest.mark.parametrize(
+    ("sensor", "options"),
+    [("depth", ["--width", "80", "--height", "60"]), ("lidar", ["--beams", "4"])],
+)
+def test_info_on_a_sim_run(tmp_path, sensor, options):
+    rate = 1.0  # one frame a second: a whole route in ~40 frames
+    args = ["sim", "--robots", "2", "--rate", str(rate), "--sensor", sensor, *options]
+    result = CliRunner().invoke(main, [*args, "--out", str(tmp_path), "--json"])
+    assert result.exit_code == 0, result.output
+    meta = json.loads(result.stdout.strip().splitlines()[-1])
+    for robot, (frames, name) in enumerate((r["frames"], r["name"]) for r in meta["robots"]):
+        result = CliRunner().invoke(main, ["info", str(tmp_path / name), "--json", "--sample", "3"])
+        assert result.exit_code == 0, result.output
+        r = json.loads(result.stdout)
+        assert r["format"] == ("tum" if sensor == "depth" else "pointfiles")
+        assert r["frames"] == frames > 30
+        assert r["duration_s"] == pytest.approx((frames - 1) / rate)
+        # The last frame falls up to one frame's drive short of the route's end.
+        route = route_length("office", robot)
+        assert route - Motion().speed / rate <= r["gt_path_length_m"] <= route + 1e-6
+        assert r["path_length_m"] == pytest.approx(route, rel=0.05)  # odometry, with drift
+        assert r["points_per_frame"] > 1000
+
+
+def test_lidar_options_reach_the_sensor(tmp_path):
+    args = ["sim", "--sensor", "lidar", "--robots", "1", "--frames", "2", "--no-noise"]
+    result = CliRunner().invoke(
+        main, [*args, "--beams", "3", "--lidar-range", "4", "--out", str(tmp_path)]
+    )
+    assert result.exit_code == 0, result.output
+    points = datasets.open(tmp_path / "robot_0")[1].points.astype(np.float64)
+    r = np.linalg.norm(points, axis=1)
+    assert len(points) > 0 and r.max() < 4.0
+    # Three beams spread over ±15°: every point lies at one of three elevations.
+    elevation = np.degrees(np.arcsin(points[:, 2] / r))
+    np.testing.assert_allclose(np.unique(elevation.round(2)), [-15.0, 0.0, 15.0], atol=0.01)

@@ -7,6 +7,10 @@ poses). `open(path)` picks the loader from what the path holds.
 | "kitti" | `KittiOdometry` | a folder with velodyne/ |
 | "pointfiles" | `PointFiles` | a folder of .ply / .pcd files (with a TUM-format poses file) |
 | "rosbag" | `RosBag` | a .bag file; a ROS 2 bag folder (metadata.yaml, .db3, .mcap) or file |
+
+`gmmap sim` writes one folder per robot that `open` reads back: a TUM folder for depth cameras
+(odometry.txt and groundtruth.txt), a point-file folder for LiDARs (poses.txt, the odometry, and
+groundtruth.txt); either way ``Frame.pose`` is the odometry and ``Frame.gt_pose`` the truth.
 """
 
 from __future__ import annotations
@@ -35,9 +39,11 @@ LOADERS: dict[str, Any] = {
     "rosbag": "gmmap.datasets.rosbag:RosBag",
 }
 SUPPORTED = (
-    "tum (a TUM RGB-D folder: depth.txt, depth/, groundtruth.txt or odometry.txt), "
+    "tum (a TUM RGB-D folder: depth.txt, depth/, groundtruth.txt or odometry.txt, or a keyframe "
+    "export's truth_cam_poses.txt), "
     "kitti (a KITTI odometry sequence folder: velodyne/*.bin, poses.txt, times.txt, calib), "
-    "pointfiles (a folder of .ply/.pcd files with a TUM-format poses.txt), "
+    "pointfiles (a folder of .ply/.pcd files with a TUM-format poses.txt, and optionally "
+    "groundtruth.txt), "
     "rosbag (a ROS 1 .bag file, or a ROS 2 bag folder with metadata.yaml or a .db3/.mcap file)"
 )
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")

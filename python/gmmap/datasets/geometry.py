@@ -22,6 +22,34 @@ def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
     ).transpose(2, 0, 1)
 
 
+def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """(M, 3, 3) rotations → (M, 4) unit quaternions (qx, qy, qz, qw) with qw ≥ 0.
+
+    Every entry of the outer product 4·q qᵀ is a sum of entries of R; the row of the largest
+    diagonal entry is the best-conditioned estimate of q (Shepperd's choice of pivot).
+    """
+    R = np.asarray(R, dtype=np.float64).reshape(-1, 3, 3)
+    d0, d1, d2 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    xx, yy = 1 + d0 - d1 - d2, 1 - d0 + d1 - d2
+    zz, ww = 1 - d0 - d1 + d2, 1 + d0 + d1 + d2
+    xy, xz, yz = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
+    wx, wy, wz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
+    outer = np.stack(
+        [
+            np.stack([xx, xy, xz, wx], axis=1),
+            np.stack([xy, yy, yz, wy], axis=1),
+            np.stack([xz, yz, zz, wz], axis=1),
+            np.stack([wx, wy, wz, ww], axis=1),
+        ],
+        axis=1,
+    )
+    pivot = np.argmax(np.stack([xx, yy, zz, ww], axis=1), axis=1)
+    q = outer[np.arange(len(R)), pivot]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    # q and -q are one rotation: pick qw ≥ 0 so equal rotations give equal quaternions.
+    return np.where(q[:, 3:] < 0, -q, q)
+
+
 def make_poses(translations: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
     """(M, 3) translations and (M, 4) quaternions → (M, 4, 4) rigid transforms."""
     poses = np.tile(np.eye(4), (len(translations), 1, 1))

@@ -16,7 +16,7 @@ import numpy as np
 from gmmap.datasets.base import FrameSequence, crop, drifted
 from gmmap.datasets.drift import Drift
 from gmmap.datasets.geometry import invert
-from gmmap.datasets.tum import read_table
+from gmmap.datasets.trajectory import read_table
 from gmmap.errors import FileFormatError, InvalidInputError
 
 CALIB_FILES = ("calib.txt", "calib_Tr_velo_to_cam.txt")

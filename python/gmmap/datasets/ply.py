@@ -1,4 +1,5 @@
 """A small PLY point reader (numpy only): ASCII and binary, vertex x y z; other data skipped.
+``write_ply`` writes the one layout the simulator needs: binary little-endian float32 x y z.
 
 Supports ``format ascii``, ``binary_little_endian`` and ``binary_big_endian``; the vertex
 element may hold any scalar properties (only x, y, z are kept) and may follow other elements
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gmmap.errors import FileFormatError
+from gmmap.errors import FileFormatError, InvalidInputError
 
 TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -70,6 +71,19 @@ def read_ply(path: str | Path) -> np.ndarray:
     else:
         xyz = _binary_vertices(data, header, path)
     return xyz[np.isfinite(xyz).all(axis=1)].astype(np.float32, copy=False)
+
+
+def write_ply(path: str | Path, points: np.ndarray, comment: str = "written by gmmap") -> None:
+    """Writes (N, 3) points as a binary little-endian PLY of float32 x y z (exact for float32
+    input: what ``read_ply`` returns is bit-identical)."""
+    xyz = np.asarray(points)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InvalidInputError(f"points must be (N, 3), got shape {xyz.shape}")
+    header = (
+        f"ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {len(xyz)}\n"
+        "property float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    Path(path).write_bytes(header.encode("ascii") + xyz.astype("<f4").tobytes())
 
 
 def parse_header(data: bytes, path: Path) -> PlyHeader:

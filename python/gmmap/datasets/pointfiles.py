@@ -2,7 +2,9 @@
 
 Layout: ``*.ply`` / ``*.pcd`` files directly in the folder (points in the sensor frame) and
 ``poses.txt`` (or ``trajectory.txt``, ``groundtruth.txt``, ``odometry.txt``: the first present),
-each line ``stamp tx ty tz qx qy qz qw`` giving the sensor→map pose.
+each line ``stamp tx ty tz qx qy qz qw`` giving the sensor→map pose. A ``groundtruth.txt`` beside
+another poses file is the ground truth (``gmmap sim --sensor lidar`` writes such folders: the
+robot's odometry in ``poses.txt``, the true poses in ``groundtruth.txt``).
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ from gmmap.datasets.base import FrameSequence, crop
 from gmmap.datasets.drift import Drift
 from gmmap.datasets.pcd import read_pcd
 from gmmap.datasets.ply import read_ply
-from gmmap.datasets.tum import associate, read_trajectory
+from gmmap.datasets.trajectory import associate, read_trajectory
 from gmmap.errors import FileFormatError, InvalidInputError
 
 POSES_NAMES = ("poses.txt", "trajectory.txt", "groundtruth.txt", "odometry.txt")
+GROUNDTRUTH_NAME = "groundtruth.txt"
 READERS: dict[str, Callable[[Path], np.ndarray]] = {".ply": read_ply, ".pcd": read_pcd}
 MATCHES = ("auto", "stamp", "order")
 
@@ -51,15 +54,20 @@ class PointFiles(FrameSequence):
             there; the counts must be equal.
         "auto" (default): "stamp" when every name is a number and every one has a pose within
             ``max_dt``, else "order".
+    A ground-truth file is matched to the files the same way.
 
     Options:
         poses: the poses file (a path, or a name in the folder); default the first present of
             poses.txt, trajectory.txt, groundtruth.txt, odometry.txt.
+        groundtruth: the ground-truth file (a path, or a name in the folder); default
+            groundtruth.txt when present and not the poses file. It gives ``gt_pose``.
         match, max_dt: as above.
         min_range, max_range: keep points at these distances from the sensor (metres).
         voxel: voxel size (metres) for ``gmmap.voxel_filter`` per frame; None keeps all.
-        drift: a ``Drift`` applied to the poses; then ``gt_pose`` is the poses file's pose.
-            Without drift, ``gt_pose`` is None (the file may be odometry or ground truth).
+        drift: a ``Drift`` applied to the poses; without a ground-truth file, ``gt_pose`` is
+            then the poses file's pose.
+    Without a ground-truth file or drift, ``gt_pose`` is None (the poses file may be odometry
+    or ground truth).
     """
 
     format = "pointfiles"
@@ -69,6 +77,7 @@ class PointFiles(FrameSequence):
         root: str | Path,
         *,
         poses: str | Path | None = None,
+        groundtruth: str | Path | None = None,
         match: str = "auto",
         max_dt: float = 0.02,
         min_range: float = 0.0,
@@ -82,21 +91,25 @@ class PointFiles(FrameSequence):
         if match not in MATCHES:
             raise InvalidInputError(f"match must be one of {MATCHES}, got {match!r}")
         self.options = dict(min_range=min_range, max_range=max_range, voxel=voxel)
-        files = point_files(self.root)
-        if not files:
+        self.files = point_files(self.root)
+        if not self.files:
             raise FileFormatError(f"{self.root}: no .ply or .pcd files")
         self.poses_path = self._poses_path(poses)
-        self.match = self._resolve_match(match, files, max_dt)
-        if self.match == "stamp":
-            self.files, self.stamps, true_poses = self._by_stamp(files, max_dt)
+        self.gt_path = self._groundtruth_path(groundtruth)
+        self.match = self._resolve_match(match, max_dt)
+        self.stamps, file_poses = self._matched(self.poses_path, max_dt)
+        if self.gt_path is not None:
+            self.gt_poses = self._matched(self.gt_path, max_dt)[1]
         else:
-            self.files, self.stamps, true_poses = self._by_order(files)
-        self.gt_poses = None if drift is None else true_poses
-        self.poses = true_poses if drift is None else drift(true_poses)
+            self.gt_poses = None if drift is None else file_poses
+        self.poses = file_poses if drift is None else drift(file_poses)
+
+    def _in_folder(self, name: str | Path) -> Path:
+        return Path(name) if Path(name).is_absolute() else self.root / name
 
     def _poses_path(self, poses: str | Path | None) -> Path:
         if poses is not None:
-            path = Path(poses) if Path(poses).is_absolute() else self.root / poses
+            path = self._in_folder(poses)
             if not path.is_file():
                 raise FileNotFoundError(f"{path}: missing poses file")
             return path
@@ -107,44 +120,58 @@ class PointFiles(FrameSequence):
             f"{self.root / POSES_NAMES[0]}: missing (nor any of {', '.join(POSES_NAMES[1:])})"
         )
 
-    def _resolve_match(self, match: str, files: list[Path], max_dt: float) -> str:
+    def _groundtruth_path(self, groundtruth: str | Path | None) -> Path | None:
+        if groundtruth is not None:
+            path = self._in_folder(groundtruth)
+            if not path.is_file():
+                raise FileNotFoundError(f"{path}: missing ground-truth file")
+            return path
+        path = self.root / GROUNDTRUTH_NAME
+        # The default poses file may itself be groundtruth.txt: then there is no second one.
+        return path if path.is_file() and path != self.poses_path else None
+
+    def _resolve_match(self, match: str, max_dt: float) -> str:
         if match != "auto":
             return match
-        stamps = [_number(p) for p in files]
+        stamps = [_number(p) for p in self.files]
         if any(s is None for s in stamps):
             return "order"
         pose_stamps, _ = read_trajectory(self.poses_path)
         matched = associate(np.array(stamps, dtype=np.float64), pose_stamps, max_dt) >= 0
         return "stamp" if matched.all() else "order"
 
-    def _by_stamp(
-        self, files: list[Path], max_dt: float
-    ) -> tuple[list[Path], np.ndarray, np.ndarray]:
-        numbers = [_number(p) for p in files]
+    def _matched(self, path: Path, max_dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps, poses) of the files from a trajectory file, by ``self.match``."""
+        if self.match == "stamp":
+            return self._by_stamp(path, max_dt)
+        return self._by_order(path)
+
+    def _by_stamp(self, path: Path, max_dt: float) -> tuple[np.ndarray, np.ndarray]:
+        numbers = [_number(p) for p in self.files]
         if None in numbers:
-            bad = files[numbers.index(None)]
+            bad = self.files[numbers.index(None)]
             raise FileFormatError(f"{bad}: match='stamp' needs file names that are stamps")
         stamps = np.array(numbers, dtype=np.float64)
-        pose_stamps, poses = read_trajectory(self.poses_path)
+        pose_stamps, poses = read_trajectory(path)
         idx = associate(stamps, pose_stamps, max_dt)
         if (idx < 0).any():
-            lost = [f.name for f, i in zip(files, idx, strict=True) if i < 0]
+            lost = [f.name for f, i in zip(self.files, idx, strict=True) if i < 0]
             raise FileFormatError(
-                f"{self.root}: {len(lost)} files have no pose in {self.poses_path.name} within "
+                f"{self.root}: {len(lost)} files have no pose in {path.name} within "
                 f"max_dt={max_dt} s (first: {', '.join(lost[:3])}; poses span "
                 f"{pose_stamps[0]:.3f}..{pose_stamps[-1]:.3f})"
             )
-        return files, stamps, poses[idx]
+        return stamps, poses[idx]
 
-    def _by_order(self, files: list[Path]) -> tuple[list[Path], np.ndarray, np.ndarray]:
-        stamps, poses = read_trajectory(self.poses_path, sort=False)
-        if len(stamps) != len(files):
+    def _by_order(self, path: Path) -> tuple[np.ndarray, np.ndarray]:
+        stamps, poses = read_trajectory(path, sort=False)
+        if len(stamps) != len(self.files):
             raise FileFormatError(
-                f"{self.poses_path}: {len(stamps)} poses for {len(files)} point files in "
+                f"{path}: {len(stamps)} poses for {len(self.files)} point files in "
                 f"{self.root} (match='order' pairs them line by line; match='stamp' needs file "
                 "names that are stamps)"
             )
-        return files, stamps, poses
+        return stamps, poses
 
     def _points(self, i: int) -> np.ndarray:
         path = self.files[i]

@@ -4,6 +4,11 @@ Folder layout (as published): ``depth.txt`` (``stamp path`` per line), ``depth/*
 metres = value / depth_factor, 0 = no reading) and ``groundtruth.txt`` (``stamp tx ty tz qx qy
 qz qw``). Folders written by gmmap's simulator add ``odometry.txt`` (same format, the robot's
 own map frame) and ``intrinsics.txt`` (one line ``fx fy cx cy``).
+
+Keyframe exports (such as ``tum_fr3_cabinet_keyframes``) number their frames 0, 1, … in
+``depth.txt`` and keep the ground truth in ``truth_cam_poses.txt`` (TUM format, line i = frame
+i); their ``depth.txt`` may name a folder other than the one shipped (``depth_imgs/`` for
+``depth/``), so a listed image that is missing is looked for by name in ``depth/``.
 """
 
 from __future__ import annotations
@@ -17,9 +22,16 @@ from PIL import Image, UnidentifiedImageError
 
 from gmmap.datasets.base import FrameSequence, drifted
 from gmmap.datasets.drift import Drift
-from gmmap.datasets.geometry import make_poses, quaternion_to_matrix
+from gmmap.datasets.geometry import quaternion_to_matrix
+from gmmap.datasets.trajectory import associate, read_table, read_trajectory
 from gmmap.errors import FileFormatError, InvalidInputError
 
+# Trajectories matched to depth frames by time, and the keyframe ground truth matched by line.
+TIMED_POSES = ("groundtruth.txt", "odometry.txt")
+KEYFRAME_POSES = "truth_cam_poses.txt"
+
+# associate, read_table, read_trajectory (trajectory.py) and quaternion_to_matrix (geometry.py)
+# are re-exported: callers have long imported them from here.
 __all__ = [
     "INTRINSICS",
     "Intrinsics",
@@ -65,43 +77,6 @@ def intrinsics_for(root: Path) -> Intrinsics:
     )
 
 
-def read_table(path: Path, columns: int) -> list[list[str]]:
-    """Rows of a whitespace-separated text file, comments skipped, with at least ``columns``."""
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: missing")
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(f"{path}: not a text file ({exc})") from exc
-    rows = []
-    for n, line in enumerate(text.splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        fields = line.replace(",", " ").split()
-        if len(fields) < columns:
-            raise FileFormatError(f"{path}:{n}: expected {columns} fields, got {len(fields)}")
-        rows.append(fields)
-    return rows
-
-
-def read_trajectory(path: Path, sort: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """TUM trajectory file → (stamps (M,), poses (M, 4, 4)), sorted by time unless ``sort`` is
-    False (then in line order, for files whose line i belongs to frame i)."""
-    rows = read_table(path, 8)
-    try:
-        data = np.array([[float(v) for v in r[:8]] for r in rows])
-    except ValueError as exc:
-        raise FileFormatError(f"{path}: non-numeric value ({exc})") from exc
-    if len(data) == 0:
-        raise FileFormatError(f"{path}: no poses")
-    if not np.isfinite(data).all():
-        raise FileFormatError(f"{path}: NaN or infinite values")
-    if sort:
-        data = data[np.argsort(data[:, 0], kind="stable")]
-    return data[:, 0], make_poses(data[:, 1:4], data[:, 4:8])
-
-
 def read_intrinsics(path: Path) -> Intrinsics:
     """``intrinsics.txt``: one line ``fx fy cx cy`` (pixels)."""
     row = read_table(path, 4)
@@ -110,18 +85,6 @@ def read_intrinsics(path: Path) -> Intrinsics:
     except (IndexError, ValueError) as exc:
         raise FileFormatError(f"{path}: expected one line 'fx fy cx cy' ({exc})") from exc
     return Intrinsics(fx, fy, cx, cy)
-
-
-def associate(query: np.ndarray, reference: np.ndarray, max_dt: float) -> np.ndarray:
-    """For each query stamp, the index of the nearest reference stamp, or -1 beyond ``max_dt``."""
-    right = np.clip(np.searchsorted(reference, query), 1, len(reference) - 1)
-    left = right - 1
-    nearest = np.where(
-        np.abs(reference[left] - query) <= np.abs(reference[right] - query), left, right
-    )
-    if len(reference) == 1:
-        nearest = np.zeros_like(query, dtype=int)
-    return np.where(np.abs(reference[nearest] - query) <= max_dt, nearest, -1)
 
 
 def read_depth(path: Path) -> np.ndarray:
@@ -195,7 +158,11 @@ class TumRgbd(FrameSequence):
     ground truth (``groundtruth.txt``, optional then); without it, both are the ground truth.
     Each depth frame takes the pose nearest in time within ``max_dt`` seconds from each file;
     frames lacking one are left out (TUM's motion capture starts after the camera), and a
-    folder where no frame has one raises FileFormatError.
+    folder where no frame has one raises FileFormatError. ``match`` is then "stamp".
+
+    A keyframe folder, with ``truth_cam_poses.txt`` and neither of the files above, pairs frame
+    i with line i (the counts must agree) and takes its stamps from there; ``match`` is
+    "order" and both poses are that ground truth.
 
     Options:
         stride: take every ``stride``-th pixel in both directions (1 = all 307,200).
@@ -203,7 +170,7 @@ class TumRgbd(FrameSequence):
         max_dt: association tolerance between depth and pose stamps (seconds).
         depth_factor: PNG value per metre (5000 for TUM and the simulator).
         intrinsics: the camera; default ``intrinsics.txt`` if present, else the fr1/fr2/fr3
-            calibration named by the folder (``..._freiburg1_...``).
+            calibration named by the folder (``..._freiburg1_...``, ``tum_fr3_...``).
         drift: a ``Drift`` applied to the poses (simulated odometry); ``gt_pose`` is untouched.
     """
 
@@ -231,19 +198,15 @@ class TumRgbd(FrameSequence):
             depth_factor=depth_factor, stride=int(stride), min_range=min_range, max_range=max_range
         )
         stamps, files = self._depth_list()
-        sources = self._pose_files()
-        matches = {name: associate(stamps, read[0], max_dt) for name, read in sources.items()}
-        keep = np.logical_and.reduce([m >= 0 for m in matches.values()])
-        if not keep.any():
-            raise FileFormatError(
-                f"{self.root}: no frame of depth.txt has a pose in {' and '.join(sources)} "
-                f"within max_dt={max_dt} s (depth stamps {stamps.min():.3f}..{stamps.max():.3f})"
-            )
-        self.stamps = stamps[keep]
-        self.files = [f for f, k in zip(files, keep, strict=True) if k]
-        picked = {name: sources[name][1][m[keep]] for name, m in matches.items()}
-        self.gt_poses = picked.get("groundtruth.txt")
-        self.poses = drifted(picked.get("odometry.txt", self.gt_poses), drift)
+        timed = any((self.root / name).is_file() for name in TIMED_POSES)
+        if timed or not (self.root / KEYFRAME_POSES).is_file():
+            self.match = "stamp"
+            self.stamps, self.files, gt, odom = self._by_stamp(stamps, files, max_dt)
+        else:
+            self.match = "order"
+            self.stamps, self.files, gt, odom = self._by_order(files)
+        self.gt_poses = gt
+        self.poses = drifted(gt if odom is None else odom, drift)
 
     def _default_intrinsics(self) -> Intrinsics:
         path = self.root / "intrinsics.txt"
@@ -258,17 +221,58 @@ class TumRgbd(FrameSequence):
             stamps = np.array([float(r[0]) for r in rows])
         except ValueError as exc:
             raise FileFormatError(f"{path}: non-numeric stamp ({exc})") from exc
-        return stamps, [self.root / r[1] for r in rows]
+        return stamps, [self._locate(r[1]) for r in rows]
 
-    def _pose_files(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    def _locate(self, listed: str) -> Path:
+        """The depth image depth.txt names, or one of that name in depth/ when only that exists
+        (a missing image stays as listed: reading it then names the file depth.txt gave)."""
+        path = self.root / listed
+        if path.is_file():
+            return path
+        moved = self.root / "depth" / path.name
+        return moved if moved.is_file() else path
+
+    def _by_stamp(
+        self, stamps: np.ndarray, files: list[Path], max_dt: float
+    ) -> tuple[np.ndarray, list[Path], np.ndarray | None, np.ndarray | None]:
+        """Frames with a pose within max_dt in every timed trajectory present: (stamps, files,
+        ground truth or None, odometry or None)."""
+        sources = self._timed_pose_files()
+        matches = {name: associate(stamps, read[0], max_dt) for name, read in sources.items()}
+        keep = np.logical_and.reduce([m >= 0 for m in matches.values()])
+        if not keep.any():
+            raise FileFormatError(
+                f"{self.root}: no frame of depth.txt has a pose in {' and '.join(sources)} "
+                f"within max_dt={max_dt} s (depth stamps {stamps.min():.3f}..{stamps.max():.3f})"
+            )
+        picked = {name: sources[name][1][m[keep]] for name, m in matches.items()}
+        kept = [f for f, k in zip(files, keep, strict=True) if k]
+        return stamps[keep], kept, picked.get("groundtruth.txt"), picked.get("odometry.txt")
+
+    def _by_order(self, files: list[Path]) -> tuple[np.ndarray, list[Path], np.ndarray, None]:
+        """Frame i with line i of the keyframe ground truth, whose stamps replace depth.txt's
+        (keyframe exports number their frames there)."""
+        path = self.root / KEYFRAME_POSES
+        stamps, poses = read_trajectory(path, sort=False)
+        if len(stamps) != len(files):
+            raise FileFormatError(
+                f"{path}: {len(stamps)} poses for {len(files)} frames in depth.txt (line i is "
+                "frame i's pose: the counts must agree)"
+            )
+        return stamps, files, poses, None
+
+    def _timed_pose_files(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The trajectories present: ground truth and/or odometry (at least one)."""
         found = {
             name: read_trajectory(self.root / name)
-            for name in ("groundtruth.txt", "odometry.txt")
+            for name in TIMED_POSES
             if (self.root / name).is_file()
         }
         if not found:
-            raise FileNotFoundError(f"{self.root / 'groundtruth.txt'}: missing (no poses)")
+            raise FileNotFoundError(
+                f"{self.root / TIMED_POSES[0]}: missing (nor odometry.txt or {KEYFRAME_POSES}: "
+                "no poses)"
+            )
         return found
 
     def _points(self, i: int) -> np.ndarray:

@@ -1,7 +1,7 @@
 """The multi-robot simulator: worlds of primitives, ray-cast sensors, robots with odometry."""
 
 from gmmap.sim.robots import Motion, route_poses
-from gmmap.sim.run import SimRobot, simulate, write_run, write_tum
+from gmmap.sim.run import SimRobot, simulate, write_pointfiles, write_run, write_tum
 from gmmap.sim.sensors import DepthCamera, Lidar
 from gmmap.sim.world import Box, Cylinder, World
 from gmmap.sim.worlds import WORLDS, get_world
@@ -18,6 +18,7 @@ __all__ = [
     "get_world",
     "route_poses",
     "simulate",
+    "write_pointfiles",
     "write_run",
     "write_tum",
 ]

@@ -12,6 +12,7 @@ import numpy as np
 from PIL import Image
 
 from gmmap.datasets.frame import Frame
+from gmmap.datasets.ply import write_ply
 from gmmap.datasets.trajectory import write_trajectory
 from gmmap.datasets.tum import depth_to_points
 from gmmap.errors import InvalidInputError
@@ -20,6 +21,7 @@ from gmmap.sim.sensors import DepthCamera, Lidar
 from gmmap.sim.world import World
 
 Sensor = DepthCamera | Lidar
+Progress = Callable[[int], None]
 # Stamps start at a fixed epoch so runs are reproducible byte for byte.
 EPOCH = 1_700_000_000.0
 
@@ -119,7 +121,7 @@ def simulate(
     return run
 
 
-def write_tum(robot: SimRobot, folder: str | Path, progress: Callable[[int], None] | None = None):
+def write_tum(robot: SimRobot, folder: str | Path, progress: Progress | None = None) -> None:
     """Writes a TUM RGB-D style folder: depth/*.png, depth.txt, groundtruth.txt (world frame),
     odometry.txt (the robot's map frame) and intrinsics.txt; `datasets.open` reads it back."""
     cam = robot.sensor
@@ -139,6 +141,29 @@ def write_tum(robot: SimRobot, folder: str | Path, progress: Callable[[int], Non
     (folder / "intrinsics.txt").write_text(f"{cam.fx} {cam.fy} {cam.cx} {cam.cy}\n")
 
 
+def write_pointfiles(robot: SimRobot, folder: str | Path, progress: Progress | None = None) -> None:
+    """Writes a point-file folder: one binary PLY per scan named by its stamp (float32 x y z in
+    the sensor frame), poses.txt (odometry, the robot's map frame) and groundtruth.txt (world
+    frame); `datasets.open` reads it back with pose = odometry and gt_pose = ground truth."""
+    if not isinstance(robot.sensor, Lidar):
+        raise InvalidInputError("point-file folders hold LiDAR scans; use a Lidar")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for i, stamp in enumerate(robot.stamps):
+        # The loader matches files to poses by the stamp in the name: the same 6 decimals as
+        # the trajectory files.
+        write_ply(folder / f"{stamp:.6f}.ply", robot.points(i), comment=f"gmmap sim {robot.name}")
+        if progress:
+            progress(i)
+    write_trajectory(folder / "poses.txt", robot.stamps, robot.odom_poses)
+    write_trajectory(folder / "groundtruth.txt", robot.stamps, robot.gt_poses)
+
+
+def writer_for(sensor: Sensor) -> Callable[[SimRobot, str | Path, Progress | None], None]:
+    """The folder format of a sensor: TUM RGB-D for depth cameras, point files for LiDARs."""
+    return write_pointfiles if isinstance(sensor, Lidar) else write_tum
+
+
 def write_run(
     run: list[SimRobot],
     out: str | Path,
@@ -146,14 +171,15 @@ def write_run(
     progress: Callable[[str, int, int], None] | None = None,
     **info: object,
 ) -> dict:
-    """Writes every robot's folder, the world file and ``sim.json`` (the run's metadata,
-    including each robot's map→world transform: the ground truth the robots do not know).
-    Keyword arguments are recorded in sim.json too (e.g. the drift parameters)."""
+    """Writes every robot's folder (``write_tum`` or ``write_pointfiles``, by sensor), the world
+    file and ``sim.json`` (the run's metadata, including each robot's map→world transform: the
+    ground truth the robots do not know). Keyword arguments are recorded in sim.json too (e.g.
+    the drift parameters)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for r in run:
         step = (lambda i, r=r: progress(r.name, i + 1, len(r))) if progress else None
-        write_tum(r, out / r.name, step)
+        writer_for(r.sensor)(r, out / r.name, step)
     run[0].world.save(out / "world.json")
     meta = {
         "world": run[0].world.name,
