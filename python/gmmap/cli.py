@@ -265,15 +265,15 @@ def build(
     frames = datasets.open(path, **({"stride": stride} if stride else {}))
     n = min(len(frames), max_frames or len(frames))
     options = BuildOptions(
-        frames_per_submap,
-        voxel,
-        strategy,
-        components,
-        covariance,
-        novelty,
-        select,
-        SelectOptions(kl_threshold=kl_threshold),
-        holdout,
+        frames_per_submap=frames_per_submap,
+        voxel_size=voxel,
+        strategy=strategy,
+        n_components=components,
+        covariance=covariance,
+        min_novelty=novelty,
+        select=select,
+        selection=SelectOptions(kl_threshold=kl_threshold),
+        holdout=holdout,
     )
     with click.progressbar(
         (frames[i] for i in range(n)),

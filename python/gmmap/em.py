@@ -22,7 +22,7 @@ def fit_gmm(
     max_iter: int = 100,
     tol: float = 1e-3,
     seed: int = 0,
-    init: str = "kmeans++",
+    init: str | Gmm = "kmeans++",
     *,
     reg_covar: float = 1e-6,
     truncation: float = 5.0,
@@ -37,7 +37,8 @@ def fit_gmm(
         max_iter: EM iterations at most (0 returns the k-means++ initialisation).
         tol: stop when the mean log-likelihood per point changes by less than this (0: never).
         seed: seeds the initialisation; the same seed gives the identical fit on any thread count.
-        init: "kmeans++" (greedy, as scikit-learn) or "random" (distinct random points).
+        init: "kmeans++" (greedy, as scikit-learn), "random" (distinct random points), or a
+            Gmm to continue EM from (its size replaces ``n_components``; ``seed`` is unused).
         reg_covar: added to every variance after each M-step: the variance floor (squared units,
             m² for metric data), so flat or duplicate points never make a covariance singular.
         truncation: a component is not evaluated for points beyond this many standard deviations
@@ -53,8 +54,8 @@ def fit_gmm(
     _check_int("seed", seed, 0)
     if covariance not in COVARIANCES:
         raise InvalidInputError(f"covariance must be one of {COVARIANCES}, got {covariance!r}")
-    if init not in INITS:
-        raise InvalidInputError(f"init must be one of {INITS}, got {init!r}")
+    if not isinstance(init, Gmm) and init not in INITS:
+        raise InvalidInputError(f"init must be one of {INITS} or a Gmm, got {init!r}")
     if not (math.isfinite(tol) and tol >= 0):
         raise InvalidInputError(f"tol must be finite and >= 0, got {tol}")
     if not (math.isfinite(reg_covar) and reg_covar > 0):
@@ -63,17 +64,22 @@ def fit_gmm(
         raise InvalidInputError(f"truncation must be > 0, got {truncation}")
 
     start = time.perf_counter()
-    (weights, means, covs), n_iter, converged, ll = _core.fit_em(
-        pts,
-        int(n_components),
-        covariance == "full",
-        int(max_iter),
-        float(tol),
-        int(seed),
-        init,
-        float(reg_covar),
-        float(truncation),
-    )
+    full, numbers = covariance == "full", (float(reg_covar), float(truncation))
+    if isinstance(init, Gmm):
+        (weights, means, covs), n_iter, converged, ll = _core.refine_em(
+            pts,
+            init.weights,
+            init.means,
+            init.covariances,
+            full,
+            int(max_iter),
+            float(tol),
+            *numbers,
+        )
+    else:
+        (weights, means, covs), n_iter, converged, ll = _core.fit_em(
+            pts, int(n_components), full, int(max_iter), float(tol), int(seed), init, *numbers
+        )
     info = FitInfo(int(n_iter), bool(converged), float(ll), time.perf_counter() - start)
     return Gmm(weights, means, covs, fit_info=info)
 

@@ -75,21 +75,55 @@ const MIN_MASS: f64 = 1e-6;
 /// Fits a mixture to `points` by EM. Deterministic for a seed.
 pub fn fit(points: &[[f64; 3]], opts: &EmOptions) -> Result<EmResult, CoreError> {
     validate(points, opts)?;
-    // Work around the centroid: keeps squares small and the grid origin well-conditioned.
-    let centre = centroid(points);
-    let pts: Vec<[f64; 3]> = points
-        .iter()
-        .map(|p| [p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]])
-        .collect();
-
+    let (pts, centre) = centred(points);
     let mut rng = Rng::new(opts.seed);
     let seeds = match opts.init {
         InitMethod::KMeansPlusPlus => kmeans_pp(&pts, opts.n_components, &mut rng),
         InitMethod::Random => random_points(&pts, opts.n_components, &mut rng),
     };
-    let mut model = Model::from_seeds(&pts, &seeds, opts);
-    let grid = Grid::new(&pts, seeds.len());
+    let model = Model::from_seeds(&pts, &seeds, opts);
+    iterate(&pts, centre, model, opts)
+}
 
+/// Continues EM on `points` from the mixture `start` (its size replaces `n_components`;
+/// `init` and `seed` are unused). Used to re-fit a submap after its components were merged.
+pub fn refine(points: &[[f64; 3]], start: &Gmm, opts: &EmOptions) -> Result<EmResult, CoreError> {
+    validate(points, opts)?;
+    start.prepare()?; // every covariance positive-definite
+    let (pts, centre) = centred(points);
+    let model = Model {
+        weights: start.weights.clone(),
+        means: start
+            .means
+            .iter()
+            .map(|m| [m[0] - centre[0], m[1] - centre[1], m[2] - centre[2]])
+            .collect(),
+        covs: start.covariances.clone(),
+        alive: start.weights.iter().map(|&w| w > 0.0).collect(),
+    };
+    iterate(&pts, centre, model, opts)
+}
+
+/// The points around their centroid (keeps squares small and the grid well-conditioned).
+fn centred(points: &[[f64; 3]]) -> (Vec<[f64; 3]>, [f64; 3]) {
+    let c = centroid(points);
+    (
+        points
+            .iter()
+            .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
+            .collect(),
+        c,
+    )
+}
+
+/// The EM iterations from `model` until convergence or `max_iter`.
+fn iterate(
+    pts: &[[f64; 3]],
+    centre: [f64; 3],
+    mut model: Model,
+    opts: &EmOptions,
+) -> Result<EmResult, CoreError> {
+    let grid = Grid::new(pts, model.alive.len());
     let (mut prev, mut log_likelihood) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
     let (mut n_iter, mut converged) = (0, false);
     while n_iter < opts.max_iter {
@@ -690,6 +724,31 @@ mod tests {
         assert_eq!(a.gmm, b.gmm);
         let c = fit(&pts, &EmOptions { seed: 9, ..opts }).unwrap();
         assert_ne!(a.gmm, c.gmm);
+    }
+
+    #[test]
+    fn refine_from_a_fit_improves_or_keeps_the_likelihood() {
+        let (pts, _) = sample_known(3000, 4);
+        let base = EmOptions {
+            n_components: 6,
+            max_iter: 3,
+            tol: 0.0,
+            ..Default::default()
+        };
+        let rough = fit(&pts, &base).unwrap();
+        let more = refine(
+            &pts,
+            &rough.gmm,
+            &EmOptions {
+                max_iter: 20,
+                covariance: CovType::Full,
+                ..base
+            },
+        )
+        .unwrap();
+        let score = |g: &Gmm| g.log_pdf(&pts).unwrap().iter().sum::<f64>() / pts.len() as f64;
+        assert_eq!(more.gmm.len(), 6);
+        assert!(score(&more.gmm) > score(&rough.gmm));
     }
 
     #[test]

@@ -14,7 +14,7 @@ pub mod rng;
 pub mod select;
 pub mod voxel;
 
-pub use em::{fit, CovType, EmOptions, EmResult, InitMethod};
+pub use em::{fit, refine, CovType, EmOptions, EmResult, InitMethod};
 pub use error::CoreError;
 pub use gmm::Gmm;
 pub use linalg::Sym3;

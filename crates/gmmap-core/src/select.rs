@@ -28,8 +28,8 @@ impl Default for SelectOptions {
     fn default() -> Self {
         SelectOptions {
             flat_ratio: 0.1,
-            max_distance: 1.0,
-            kl_threshold: 1.0,
+            max_distance: 2.0,
+            kl_threshold: 16.0,
         }
     }
 }

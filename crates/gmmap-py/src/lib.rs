@@ -105,6 +105,41 @@ fn fit_em<'py>(
     ))
 }
 
+/// EM continued from a given mixture: (weights, means, covariances, n_iter, converged, ll).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn refine_em<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    weights: PyReadonlyArray1<'py, f64>,
+    means: PyReadonlyArray2<'py, f64>,
+    covariances: PyReadonlyArray3<'py, f64>,
+    full: bool,
+    max_iter: usize,
+    tol: f64,
+    reg_covar: f64,
+    truncation: f64,
+) -> PyResult<(GmmArrays<'py>, usize, bool, f64)> {
+    let start = gmm_of(weights, means, covariances)?;
+    let opts = EmOptions {
+        n_components: start.len(),
+        covariance: if full { CovType::Full } else { CovType::Diag },
+        max_iter,
+        tol,
+        reg_covar,
+        truncation,
+        ..Default::default()
+    };
+    let pts = points_of(&points)?;
+    let fit = in_pool(py, || gmmap_core::refine(&pts, &start, &opts)).map_err(value_error)?;
+    Ok((
+        gmm_to_arrays(py, &fit.gmm)?,
+        fit.n_iter,
+        fit.converged,
+        fit.log_likelihood,
+    ))
+}
+
 /// log p(x) of every point under the mixture.
 #[pyfunction]
 fn log_pdf<'py>(
@@ -317,6 +352,7 @@ impl RayScene {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_em, m)?)?;
+    m.add_function(wrap_pyfunction!(refine_em, m)?)?;
     m.add_function(wrap_pyfunction!(log_pdf, m)?)?;
     m.add_function(wrap_pyfunction!(gradient, m)?)?;
     m.add_function(wrap_pyfunction!(voxel_filter, m)?)?;
