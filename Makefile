@@ -33,7 +33,7 @@ lint: install
 	$(BIN)/ruff format --check python tests benchmarks
 
 bench: install
-	$(BIN)/python benchmarks/em.py
+	for b in em raycast loaders selection; do $(BIN)/python benchmarks/$$b.py > bench-$$b.json || exit 1; done
 
 clean:
 	rm -rf $(VENV) target
