@@ -65,11 +65,17 @@ def test_fr1_xyz_association_by_hand(shared_data):
     # depth frames inside it (108.867534, 108.903540) have no pose within 20 ms.
     assert len(seq) == 796
     assert 1305031108.867534 not in seq.stamps and 1305031108.90354 not in seq.stamps
-    # Depth 102.160407 lies 4.6 ms after ground-truth line 102.1558 and 5.4 ms before 102.1658.
+    # Depth 102.160407 lies 4.6 ms after ground-truth line 102.1558 and 5.4 ms before 102.1658:
+    # the pose is interpolated 46.07 % of the way from the first to the second.
     assert seq.stamps[0] == 1305031102.160407
-    np.testing.assert_allclose(seq.gt_poses[0][:3, 3], [1.3452, 0.6273, 1.6627])
-    R = quaternion_to_matrix(np.array([[0.6582, 0.6109, -0.2950, -0.3265]]))[0]
-    np.testing.assert_allclose(seq.gt_poses[0][:3, :3], R)
+    a = (1305031102.160407 - 1305031102.1558) / 0.01
+    t0, t1 = np.array([1.3452, 0.6273, 1.6627]), np.array([1.3434, 0.6271, 1.6606])
+    np.testing.assert_allclose(seq.gt_poses[0][:3, 3], t0 + a * (t1 - t0), rtol=1e-9)
+    R0 = quaternion_to_matrix(np.array([[0.6582, 0.6109, -0.2950, -0.3265]]))[0]
+    R1 = quaternion_to_matrix(np.array([[0.6583, 0.6112, -0.2938, -0.3266]]))[0]
+    # Between the two samples: the rotation from R0 is `a` of the rotation from R0 to R1.
+    angle = lambda R: np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))  # noqa: E731
+    assert angle(R0.T @ seq.gt_poses[0][:3, :3]) == pytest.approx(a * angle(R0.T @ R1), rel=1e-3)
     np.testing.assert_array_equal(seq.poses, seq.gt_poses)  # no odometry: pose = ground truth
     assert seq.format == "tum" and seq[-1].stamp == seq.stamps[-1]
 
@@ -80,9 +86,17 @@ def test_bundled_slice_association_and_sequence_protocol():
     np.testing.assert_array_equal(seq.stamps, listed)
     gt_stamps, gt_poses = read_trajectory(BUNDLED_TUM_SLICE / "groundtruth.txt")
     for stamp, pose in zip(seq.stamps, seq.gt_poses, strict=True):
-        nearest = np.argmin(np.abs(gt_stamps - stamp))
-        assert abs(gt_stamps[nearest] - stamp) <= 0.02
-        np.testing.assert_array_equal(pose, gt_poses[nearest])
+        # Interpolated between the samples around the stamp when both are within 20 ms (so
+        # within their span), else the nearest sample (beside a gap in the motion capture).
+        right = np.searchsorted(gt_stamps, stamp)
+        lo, hi = gt_poses[right - 1][:3, 3], gt_poses[right][:3, 3]
+        if gt_stamps[right] - stamp <= 0.02 and stamp - gt_stamps[right - 1] <= 0.02:
+            assert np.all(pose[:3, 3] >= np.minimum(lo, hi) - 1e-12)
+            assert np.all(pose[:3, 3] <= np.maximum(lo, hi) + 1e-12)
+        else:
+            nearest = np.argmin(np.abs(gt_stamps - stamp))
+            assert abs(gt_stamps[nearest] - stamp) <= 0.02
+            np.testing.assert_array_equal(pose, gt_poses[nearest])
     frames = list(seq)
     assert len(frames) == len(seq) == 8
     assert seq[-1].stamp == frames[7].stamp and seq[-8].stamp == frames[0].stamp

@@ -6,6 +6,8 @@ from gmmap.em import fit_gmm
 from gmmap.errors import FileFormatError, GmmapError, InvalidGmmError, InvalidInputError
 from gmmap.gmm import FitInfo, Gmm
 from gmmap.points import voxel_filter
+from gmmap.register import Registration, register
+from gmmap.select import SelectOptions, select_components
 
 try:
     __version__ = version("gmmap")
@@ -19,7 +21,11 @@ __all__ = [
     "GmmapError",
     "InvalidGmmError",
     "InvalidInputError",
+    "Registration",
+    "SelectOptions",
     "__version__",
     "fit_gmm",
+    "register",
+    "select_components",
     "voxel_filter",
 ]

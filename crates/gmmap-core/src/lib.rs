@@ -10,6 +10,7 @@ pub mod gmm;
 mod init;
 pub mod linalg;
 pub mod raycast;
+pub mod register;
 pub mod rng;
 pub mod select;
 pub mod voxel;

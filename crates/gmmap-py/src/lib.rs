@@ -3,6 +3,7 @@
 //! far become `ValueError`.
 
 use gmmap_core::raycast::{Pinhole, Scene, Shape};
+use gmmap_core::register::{register, Pose, RegisterOptions};
 use gmmap_core::select::{select, SelectOptions};
 use gmmap_core::{CoreError, CovType, EmOptions, Gmm, InitMethod, Sym3};
 use numpy::{
@@ -217,6 +218,59 @@ fn l2_inner<'py>(
     in_pool(py, || f.l2_inner(&g)).map_err(value_error)
 }
 
+type RegisterOutput<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    f64,
+    Bound<'py, PyArray2<f64>>,
+    usize,
+);
+
+/// GMM-to-GMM registration: (transform 4x4, confidence, information 6x6, iterations).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale))]
+fn register_gmm<'py>(
+    py: Python<'py>,
+    source: (
+        PyReadonlyArray1<'py, f64>,
+        PyReadonlyArray2<'py, f64>,
+        PyReadonlyArray3<'py, f64>,
+    ),
+    target: (
+        PyReadonlyArray1<'py, f64>,
+        PyReadonlyArray2<'py, f64>,
+        PyReadonlyArray3<'py, f64>,
+    ),
+    init: Option<PyReadonlyArray2<'py, f64>>,
+    yaw_hint: Option<f64>,
+    scales: Vec<f64>,
+    max_iter: usize,
+    four_dof: bool,
+    yaw_starts: usize,
+    information_scale: f64,
+) -> PyResult<RegisterOutput<'py>> {
+    let (f, g) = (
+        gmm_of(source.0, source.1, source.2)?,
+        gmm_of(target.0, target.1, target.2)?,
+    );
+    let init = init
+        .map(|m| pose_of(&m).map(|m| Pose::from_matrix(&m)))
+        .transpose()?;
+    let opts = RegisterOptions {
+        scales,
+        max_iter,
+        four_dof,
+        yaw_starts,
+        information_scale,
+        ..Default::default()
+    };
+    let r = in_pool(py, || register(&f, &g, init, yaw_hint, &opts)).map_err(value_error)?;
+    let t = PyArray1::from_vec(py, r.transform.to_matrix().to_vec()).reshape([4, 4])?;
+    let info = PyArray1::from_vec(py, r.information.iter().flatten().copied().collect())
+        .reshape([6, 6])?;
+    Ok((t, r.confidence, info, r.iterations))
+}
+
 /// A submap's point buffer: voxel cells with exact centroids (see gmmap-core).
 #[pyclass(module = "gmmap._core")]
 struct VoxelBuffer {
@@ -360,5 +414,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VoxelBuffer>()?;
     m.add_function(wrap_pyfunction!(select_components, m)?)?;
     m.add_function(wrap_pyfunction!(l2_inner, m)?)?;
+    m.add_function(wrap_pyfunction!(register_gmm, m)?)?;
     Ok(())
 }

@@ -22,7 +22,7 @@ from PIL import Image, UnidentifiedImageError
 
 from gmmap.datasets.base import FrameSequence, drifted
 from gmmap.datasets.drift import Drift
-from gmmap.datasets.geometry import quaternion_to_matrix
+from gmmap.datasets.geometry import interpolate_poses, matrix_to_quaternion, quaternion_to_matrix
 from gmmap.datasets.trajectory import associate, read_table, read_trajectory
 from gmmap.errors import FileFormatError, InvalidInputError
 
@@ -151,6 +151,24 @@ def _pixel_rays(
     return rx, ry
 
 
+def at_stamps(
+    times: np.ndarray, poses: np.ndarray, query: np.ndarray, nearest: np.ndarray, max_dt: float
+) -> np.ndarray:
+    """Poses at the query stamps: interpolated between the two samples around each stamp when
+    both lie within ``max_dt`` of it (the camera moves between 100 Hz mocap samples: at fr1's
+    speeds the nearest sample alone can be 0.3° off), else the nearest sample."""
+    right = np.clip(np.searchsorted(times, query), 1, len(times) - 1)
+    left = right - 1
+    inside = (times[left] <= query) & (query <= times[right])
+    close = (query - times[left] <= max_dt) & (times[right] - query <= max_dt)
+    out = poses[nearest].copy()
+    use = inside & close
+    if use.any():
+        quats = matrix_to_quaternion(poses[:, :3, :3])
+        out[use] = interpolate_poses(times, poses[:, :3, 3], quats, query[use])
+    return out
+
+
 class TumRgbd(FrameSequence):
     """A TUM RGB-D folder as a lazy sequence of Frames (depth back-projected on access).
 
@@ -245,7 +263,10 @@ class TumRgbd(FrameSequence):
                 f"{self.root}: no frame of depth.txt has a pose in {' and '.join(sources)} "
                 f"within max_dt={max_dt} s (depth stamps {stamps.min():.3f}..{stamps.max():.3f})"
             )
-        picked = {name: sources[name][1][m[keep]] for name, m in matches.items()}
+        picked = {
+            name: at_stamps(*sources[name], stamps[keep], m[keep], max_dt)
+            for name, m in matches.items()
+        }
         kept = [f for f, k in zip(files, keep, strict=True) if k]
         return stamps[keep], kept, picked.get("groundtruth.txt"), picked.get("odometry.txt")
 

@@ -1,0 +1,673 @@
+//! GMM-to-GMM registration (paper V-B, after DESIGN.md): find the rigid T maximising the
+//! normalised L2 correlation C(T) = ∫ T(f) g / sqrt(∫f² ∫g²) of a source mixture f and a target
+//! mixture g.
+//!
+//! ∫ T(f) g = Σᵢⱼ πᵢ ρⱼ N(Rμᵢ + t; νⱼ, RΣᵢRᵀ + Λⱼ) in closed form, and the norms do not depend
+//! on T, so the optimiser maximises log F(T), F = ∫ T(f) g. The gradient with respect to a left
+//! perturbation T ← exp(ξ)·T, ξ = (ω, v), is analytic, including the rotation of the source
+//! covariances; the step is Levenberg-Marquardt on the Gauss-Newton metric
+//! H = Σ wᵢⱼ Jᵢⱼᵀ Sᵢⱼ⁻¹ Jᵢⱼ / F (Jᵢⱼ = ∂e/∂ξ = [−[p]ₓ, I]), accepted only when F grows.
+//! Coarse to fine: an isotropic variance s² is added to every covariance of both mixtures, for
+//! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
+//! `yaw_starts` rotations about +z (gravity) with the centroids aligned are tried at the coarsest
+//! scale and the best is refined. C at the end is the geometric confidence; H (scaled) is the
+//! information matrix of the estimate.
+
+use crate::gmm::Gmm;
+use crate::linalg::Sym3;
+use crate::CoreError;
+use rayon::prelude::*;
+
+const LOG_2PI: f64 = 1.837_877_066_409_345_5;
+
+#[derive(Debug, Clone)]
+pub struct RegisterOptions {
+    /// Standard deviations (same unit as the means) added to all covariances, coarse to fine.
+    pub scales: Vec<f64>,
+    /// LM iterations per scale at most.
+    pub max_iter: usize,
+    /// Stop a scale when the step is smaller than this (radians + units).
+    pub tol: f64,
+    /// Estimate only x, y, z and yaw (ground robots: roll and pitch come from gravity).
+    pub four_dof: bool,
+    /// Yaw starts tried when there is no initial guess.
+    pub yaw_starts: usize,
+    /// Pairs farther apart than this many standard deviations are skipped.
+    pub cutoff: f64,
+    /// Multiplies the Gauss-Newton metric to give the information matrix.
+    pub information_scale: f64,
+}
+
+impl Default for RegisterOptions {
+    fn default() -> Self {
+        RegisterOptions {
+            scales: vec![0.5, 0.2, 0.08, 0.0],
+            max_iter: 30,
+            tol: 1e-7,
+            four_dof: false,
+            yaw_starts: 12,
+            cutoff: 6.0,
+            information_scale: 1.0,
+        }
+    }
+}
+
+/// A rigid transform: x ↦ R x + t.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    pub r: [[f64; 3]; 3],
+    pub t: [f64; 3],
+}
+
+impl Pose {
+    pub const IDENTITY: Pose = Pose {
+        r: [[1., 0., 0.], [0., 1., 0.], [0., 0., 1.]],
+        t: [0.; 3],
+    };
+
+    /// From a row-major 4x4 matrix.
+    pub fn from_matrix(m: &[f64; 16]) -> Pose {
+        Pose {
+            r: [[m[0], m[1], m[2]], [m[4], m[5], m[6]], [m[8], m[9], m[10]]],
+            t: [m[3], m[7], m[11]],
+        }
+    }
+
+    pub fn to_matrix(&self) -> [f64; 16] {
+        let (r, t) = (&self.r, &self.t);
+        [
+            r[0][0], r[0][1], r[0][2], t[0], r[1][0], r[1][1], r[1][2], t[1], r[2][0], r[2][1],
+            r[2][2], t[2], 0., 0., 0., 1.,
+        ]
+    }
+
+    pub fn apply(&self, x: &[f64; 3]) -> [f64; 3] {
+        let m = mat_vec(&self.r, x);
+        [m[0] + self.t[0], m[1] + self.t[1], m[2] + self.t[2]]
+    }
+
+    /// exp(ξ)·self for ξ = (ω, v): R ← Exp(ω) R, t ← Exp(ω) t + v.
+    pub fn perturbed(&self, xi: &[f64; 6]) -> Pose {
+        let q = so3_exp([xi[0], xi[1], xi[2]]);
+        let t = mat_vec(&q, &self.t);
+        Pose {
+            r: mat_mul(&q, &self.r),
+            t: [t[0] + xi[3], t[1] + xi[4], t[2] + xi[5]],
+        }
+    }
+
+    fn yaw(angle: f64) -> Pose {
+        let (s, c) = angle.sin_cos();
+        Pose {
+            r: [[c, -s, 0.], [s, c, 0.], [0., 0., 1.]],
+            t: [0.; 3],
+        }
+    }
+}
+
+/// The result of a registration.
+#[derive(Debug, Clone)]
+pub struct Registration {
+    /// Maps source coordinates into the target frame.
+    pub transform: Pose,
+    /// Normalised L2 correlation at the solution, in [0, 1].
+    pub confidence: f64,
+    /// 6x6 information of ξ = (ω, v) (left perturbation, rotation first).
+    pub information: [[f64; 6]; 6],
+    pub iterations: usize,
+}
+
+fn mat_vec(m: &[[f64; 3]; 3], v: &[f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
+}
+
+fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    [0, 1, 2].map(|r| [0, 1, 2].map(|c| a[r][0] * b[0][c] + a[r][1] * b[1][c] + a[r][2] * b[2][c]))
+}
+
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// Rodrigues' formula.
+pub fn so3_exp(w: [f64; 3]) -> [[f64; 3]; 3] {
+    let theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    let theta = theta2.sqrt();
+    let (a, b) = if theta < 1e-8 {
+        (1.0 - theta2 / 6.0, 0.5 - theta2 / 24.0)
+    } else {
+        (theta.sin() / theta, (1.0 - theta.cos()) / theta2)
+    };
+    let k = [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]];
+    let k2 = mat_mul(&k, &k);
+    [0, 1, 2]
+        .map(|r| [0, 1, 2].map(|c| if r == c { 1.0 } else { 0.0 } + a * k[r][c] + b * k2[r][c]))
+}
+
+/// R Σ Rᵀ.
+fn rotate_cov(r: &[[f64; 3]; 3], s: &Sym3) -> Sym3 {
+    let m = s.to_rows();
+    let rm =
+        [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| r[i][k] * m[3 * k + j]).sum::<f64>()));
+    let out = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| rm[i][k] * r[j][k]).sum::<f64>()));
+    Sym3 {
+        xx: out[0][0],
+        yy: out[1][1],
+        zz: out[2][2],
+        xy: out[0][1],
+        xz: out[0][2],
+        yz: out[1][2],
+    }
+}
+
+/// Value of F with, optionally, its gradient (of F) and the weighted Gauss-Newton sum.
+#[derive(Clone, Copy)]
+struct Eval {
+    f: f64,
+    grad: [f64; 6],
+    h: [[f64; 6]; 6],
+}
+
+impl Eval {
+    const ZERO: Eval = Eval {
+        f: 0.0,
+        grad: [0.0; 6],
+        h: [[0.0; 6]; 6],
+    };
+
+    fn add(mut self, o: &Eval) -> Eval {
+        self.f += o.f;
+        for a in 0..6 {
+            self.grad[a] += o.grad[a];
+            for b in 0..6 {
+                self.h[a][b] += o.h[a][b];
+            }
+        }
+        self
+    }
+}
+
+/// Rows of the source processed per parallel task (a fixed split: deterministic sums).
+const ROWS: usize = 8;
+
+struct Problem<'a> {
+    source: &'a Gmm,
+    target: &'a Gmm,
+    cutoff2: f64,
+}
+
+impl Problem<'_> {
+    /// F(T) = Σᵢⱼ πᵢ ρⱼ N(Rμᵢ + t − νⱼ; 0, RΣᵢRᵀ + Λⱼ + 2s²I), and derivatives if asked.
+    fn evaluate(&self, pose: &Pose, s2: f64, derivs: bool) -> Eval {
+        let (src, tgt) = (self.source, self.target);
+        let parts: Vec<Eval> = (0..src.len())
+            .collect::<Vec<_>>()
+            .par_chunks(ROWS)
+            .map(|rows| {
+                let mut acc = Eval::ZERO;
+                for &i in rows {
+                    let p = pose.apply(&src.means[i]);
+                    let sr = rotate_cov(&pose.r, &src.covariances[i]);
+                    for j in 0..tgt.len() {
+                        self.pair(
+                            &mut acc,
+                            src.weights[i] * tgt.weights[j],
+                            &p,
+                            &sr,
+                            j,
+                            s2,
+                            derivs,
+                        );
+                    }
+                }
+                acc
+            })
+            .collect();
+        parts.iter().fold(Eval::ZERO, |a, b| a.add(b))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn pair(
+        &self,
+        acc: &mut Eval,
+        w0: f64,
+        p: &[f64; 3],
+        sr: &Sym3,
+        j: usize,
+        s2: f64,
+        derivs: bool,
+    ) {
+        let nu = &self.target.means[j];
+        let e = [p[0] - nu[0], p[1] - nu[1], p[2] - nu[2]];
+        let s = sr.add(&self.target.covariances[j]).add_diag(2.0 * s2);
+        // Cheap rejection: the Mahalanobis distance is at least |e|² / trace(S).
+        let e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        if e2 > self.cutoff2 * (s.xx + s.yy + s.zz) {
+            return;
+        }
+        let Some((prec, logdet)) = s.inverse_logdet() else {
+            return;
+        };
+        let q = prec.mul_vec(e);
+        let m = e[0] * q[0] + e[1] * q[1] + e[2] * q[2];
+        let w = w0 * (-0.5 * (m + logdet + 3.0 * LOG_2PI)).exp();
+        acc.f += w;
+        if !derivs {
+            return;
+        }
+        // d log w / dω = q × p + (Σ'q) × q − vee(Σ'P − PΣ')/2 ; d log w / dv = −q.
+        let sq = sr.mul_vec(q);
+        let (a, b) = (cross(&q, p), cross(&sq, &q));
+        let sp = sym_mul(sr, &prec);
+        let asym = [
+            sp[1][2] - sp[2][1],
+            sp[2][0] - sp[0][2],
+            sp[0][1] - sp[1][0],
+        ];
+        let g = [
+            a[0] + b[0] - asym[0],
+            a[1] + b[1] - asym[1],
+            a[2] + b[2] - asym[2],
+            -q[0],
+            -q[1],
+            -q[2],
+        ];
+        for k in 0..6 {
+            acc.grad[k] += w * g[k];
+        }
+        // Gauss-Newton metric: Jᵀ P J with J = [−[p]ₓ, I].
+        let jac = jacobian(p);
+        let pm = prec.to_rows();
+        let pj: [[f64; 6]; 3] = [0, 1, 2].map(|r| {
+            [0, 1, 2, 3, 4, 5].map(|c| (0..3).map(|k| pm[3 * r + k] * jac[k][c]).sum::<f64>())
+        });
+        for x in 0..6 {
+            for y in x..6 {
+                let v: f64 = (0..3).map(|k| jac[k][x] * pj[k][y]).sum();
+                acc.h[x][y] += w * v;
+            }
+        }
+    }
+}
+
+/// A B for two symmetric matrices (a general 3x3 result).
+fn sym_mul(a: &Sym3, b: &Sym3) -> [[f64; 3]; 3] {
+    let (x, y) = (a.to_rows(), b.to_rows());
+    [0, 1, 2].map(|r| [0, 1, 2].map(|c| (0..3).map(|k| x[3 * r + k] * y[3 * k + c]).sum()))
+}
+
+/// ∂e/∂ξ = [−[p]ₓ, I] for the left perturbation.
+fn jacobian(p: &[f64; 3]) -> [[f64; 6]; 3] {
+    [
+        [0.0, p[2], -p[1], 1.0, 0.0, 0.0],
+        [-p[2], 0.0, p[0], 0.0, 1.0, 0.0],
+        [p[1], -p[0], 0.0, 0.0, 0.0, 1.0],
+    ]
+}
+
+/// Solves the symmetric system A x = b (n ≤ 6) by Cholesky; None if not positive-definite.
+fn solve_spd(a: &[[f64; 6]; 6], b: &[f64; 6], idx: &[usize]) -> Option<[f64; 6]> {
+    let n = idx.len();
+    let mut l = [[0.0; 6]; 6];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[idx[i]][idx[j]];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if s <= 0.0 || !s.is_finite() {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut y = [0.0; 6];
+    for i in 0..n {
+        y[i] = (b[idx[i]] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut x = [0.0; 6];
+    for i in (0..n).rev() {
+        x[i] = (y[i] - (i + 1..n).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut out = [0.0; 6];
+    for (i, &k) in idx.iter().enumerate() {
+        out[k] = x[i];
+    }
+    Some(out)
+}
+
+fn symmetrise(h: &mut [[f64; 6]; 6]) {
+    for x in 0..6 {
+        for y in 0..x {
+            h[x][y] = h[y][x];
+        }
+    }
+}
+
+impl Problem<'_> {
+    /// LM ascent on log F at one scale; returns the pose, F and the iterations used.
+    fn optimise(&self, mut pose: Pose, s2: f64, opts: &RegisterOptions) -> (Pose, f64, usize) {
+        let dims: &[usize] = if opts.four_dof {
+            &[2, 3, 4, 5]
+        } else {
+            &[0, 1, 2, 3, 4, 5]
+        };
+        let mut cur = self.evaluate(&pose, s2, true);
+        let mut lambda = 1e-3;
+        let mut iters = 0;
+        while iters < opts.max_iter && cur.f > 0.0 {
+            iters += 1;
+            let grad = cur.grad.map(|g| g / cur.f);
+            let mut h = cur.h.map(|r| r.map(|v| v / cur.f));
+            symmetrise(&mut h);
+            let mut accepted = false;
+            for _ in 0..12 {
+                let mut damped = h;
+                for &d in dims {
+                    damped[d][d] += lambda * h[d][d].max(1e-12) + 1e-12;
+                }
+                let Some(step) = solve_spd(&damped, &grad, dims) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let next = pose.perturbed(&step);
+                let trial = self.evaluate(&next, s2, true);
+                if trial.f > cur.f {
+                    let size = step.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    pose = next;
+                    cur = trial;
+                    lambda = (lambda / 3.0).max(1e-9);
+                    accepted = size > opts.tol;
+                    break;
+                }
+                lambda *= 4.0;
+            }
+            if !accepted {
+                break;
+            }
+        }
+        (pose, cur.f, iters)
+    }
+}
+
+fn weighted_mean(g: &Gmm) -> [f64; 3] {
+    let mut m = [0.0; 3];
+    for (w, mu) in g.weights.iter().zip(&g.means) {
+        for a in 0..3 {
+            m[a] += w * mu[a];
+        }
+    }
+    m
+}
+
+fn validate(g: &Gmm, which: &str) -> Result<(), CoreError> {
+    if g.is_empty() {
+        return Err(CoreError::InvalidArgument(format!(
+            "the {which} mixture has no components"
+        )));
+    }
+    let finite = g.weights.iter().all(|w| w.is_finite())
+        && g.means.iter().flatten().all(|v| v.is_finite())
+        && g.covariances
+            .iter()
+            .all(|c| c.to_rows().iter().all(|v| v.is_finite()));
+    if !finite {
+        return Err(CoreError::InvalidArgument(format!(
+            "the {which} mixture has non-finite values"
+        )));
+    }
+    g.prepare().map(|_| ())
+}
+
+/// Registers `source` onto `target`. With `init` = None, searches `yaw_starts` yaws about +z
+/// (or starts near `yaw_hint` when given) with the weighted centroids aligned.
+pub fn register(
+    source: &Gmm,
+    target: &Gmm,
+    init: Option<Pose>,
+    yaw_hint: Option<f64>,
+    opts: &RegisterOptions,
+) -> Result<Registration, CoreError> {
+    validate(source, "source")?;
+    validate(target, "target")?;
+    if opts.scales.is_empty() || opts.scales.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
+        return Err(CoreError::InvalidArgument(
+            "scales must be finite and >= 0".into(),
+        ));
+    }
+    let problem = Problem {
+        source,
+        target,
+        cutoff2: opts.cutoff * opts.cutoff,
+    };
+    let coarse = opts.scales[0] * opts.scales[0];
+    let mut iterations = 0;
+    let start = match init {
+        Some(pose) => pose,
+        None => {
+            let yaws: Vec<f64> = match yaw_hint {
+                Some(y) => vec![y, y - 0.5, y + 0.5],
+                None => (0..opts.yaw_starts.max(1))
+                    .map(|k| 2.0 * std::f64::consts::PI * k as f64 / opts.yaw_starts.max(1) as f64)
+                    .collect(),
+            };
+            let (ms, mt) = (weighted_mean(source), weighted_mean(target));
+            let mut best = (f64::NEG_INFINITY, Pose::IDENTITY);
+            for yaw in yaws {
+                let mut pose = Pose::yaw(yaw);
+                let rm = mat_vec(&pose.r, &ms);
+                pose.t = [mt[0] - rm[0], mt[1] - rm[1], mt[2] - rm[2]];
+                let (p, f, it) = problem.optimise(pose, coarse, opts);
+                iterations += it;
+                if f > best.0 {
+                    best = (f, p);
+                }
+            }
+            best.1
+        }
+    };
+    let mut pose = start;
+    for s in &opts.scales {
+        let (p, _, it) = problem.optimise(pose, s * s, opts);
+        pose = p;
+        iterations += it;
+    }
+    let fin = problem.evaluate(&pose, 0.0, true);
+    let norm = (source.l2_inner(source)? * target.l2_inner(target)?).sqrt();
+    let mut h = fin.h;
+    symmetrise(&mut h);
+    let scale = if fin.f > 0.0 {
+        opts.information_scale / fin.f
+    } else {
+        0.0
+    };
+    Ok(Registration {
+        transform: pose,
+        confidence: (fin.f / norm).clamp(0.0, 1.0),
+        information: h.map(|r| r.map(|v| v * scale)),
+        iterations,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small scene: floor, two walls and a box, as flat Gaussians.
+    fn scene() -> Gmm {
+        let mut g = Gmm {
+            weights: vec![],
+            means: vec![],
+            covariances: vec![],
+        };
+        let mut add = |m: [f64; 3], c: Sym3| {
+            g.weights.push(1.0);
+            g.means.push(m);
+            g.covariances.push(c);
+        };
+        for x in 0..4 {
+            for y in 0..3 {
+                add(
+                    [x as f64 * 0.8, y as f64 * 0.8, 0.0],
+                    Sym3::diag(0.06, 0.06, 1e-4),
+                );
+            }
+            add([x as f64 * 0.8, 2.4, 1.0], Sym3::diag(0.06, 1e-4, 0.1));
+        }
+        for y in 0..3 {
+            add([3.0, y as f64 * 0.8, 1.0], Sym3::diag(1e-4, 0.06, 0.1));
+        }
+        add(
+            [1.2, 1.0, 0.4],
+            Sym3 {
+                xx: 0.02,
+                yy: 0.03,
+                zz: 0.04,
+                xy: 0.01,
+                xz: 0.0,
+                yz: 0.005,
+            },
+        );
+        let n = g.weights.len() as f64;
+        g.weights.iter_mut().for_each(|w| *w /= n);
+        g
+    }
+
+    fn moved(g: &Gmm, p: &Pose) -> Gmm {
+        Gmm {
+            weights: g.weights.clone(),
+            means: g.means.iter().map(|m| p.apply(m)).collect(),
+            covariances: g.covariances.iter().map(|c| rotate_cov(&p.r, c)).collect(),
+        }
+    }
+
+    fn error(a: &Pose, b: &Pose) -> f64 {
+        let (x, y) = (a.to_matrix(), b.to_matrix());
+        x.iter()
+            .zip(y)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn recovers_a_known_transform() {
+        let target = scene();
+        let truth = Pose::IDENTITY.perturbed(&[0.05, -0.04, 0.3, 0.25, -0.15, 0.05]);
+        // source = truth⁻¹(target), so registering source onto target must return truth.
+        let inv = Pose {
+            r: [0, 1, 2].map(|i| [0, 1, 2].map(|j| truth.r[j][i])),
+            t: [0.; 3],
+        };
+        let inv = Pose {
+            t: mat_vec(&inv.r, &truth.t).map(|v| -v),
+            ..inv
+        };
+        let source = moved(&target, &inv);
+        let r = register(
+            &source,
+            &target,
+            Some(Pose::IDENTITY),
+            None,
+            &RegisterOptions::default(),
+        )
+        .unwrap();
+        assert!(error(&r.transform, &truth) < 1e-4, "{:?}", r.transform);
+        assert!(r.confidence > 0.999);
+        // Without a guess: yaw starts find it too.
+        let g = register(&source, &target, None, None, &RegisterOptions::default()).unwrap();
+        assert!(error(&g.transform, &truth) < 1e-4);
+    }
+
+    #[test]
+    fn confidence_is_one_for_itself_and_falls_with_misalignment() {
+        let g = scene();
+        let p = Problem {
+            source: &g,
+            target: &g,
+            cutoff2: 1e9,
+        };
+        let norm = g.l2_inner(&g).unwrap();
+        let c = |pose: &Pose| p.evaluate(pose, 0.0, false).f / norm;
+        assert!((c(&Pose::IDENTITY) - 1.0).abs() < 1e-12);
+        let mut last = 1.0;
+        for k in 1..5 {
+            let now = c(&Pose::IDENTITY.perturbed(&[0.0, 0.0, 0.0, 0.05 * k as f64, 0.0, 0.0]));
+            assert!(now < last);
+            last = now;
+        }
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let g = scene();
+        let src = moved(
+            &g,
+            &Pose::IDENTITY.perturbed(&[0.1, 0.05, -0.2, 0.1, 0.05, 0.0]),
+        );
+        let p = Problem {
+            source: &src,
+            target: &g,
+            cutoff2: 1e9,
+        };
+        let pose = Pose::IDENTITY.perturbed(&[0.02, -0.03, 0.05, 0.01, -0.02, 0.03]);
+        for s2 in [0.0, 0.01] {
+            let e = p.evaluate(&pose, s2, true);
+            for k in 0..6 {
+                let mut d = [0.0; 6];
+                d[k] = 1e-6;
+                let plus = p.evaluate(&pose.perturbed(&d), s2, false).f;
+                d[k] = -1e-6;
+                let minus = p.evaluate(&pose.perturbed(&d), s2, false).f;
+                let fd = (plus - minus) / 2e-6;
+                assert!(
+                    (fd - e.grad[k]).abs() < 1e-5 * (1.0 + fd.abs()),
+                    "k={k}: {fd} vs {}",
+                    e.grad[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn four_dof_keeps_roll_and_pitch() {
+        let target = scene();
+        let truth = Pose::IDENTITY.perturbed(&[0.0, 0.0, 0.4, 0.2, 0.1, 0.0]);
+        let inv = Pose::IDENTITY.perturbed(&[0.0, 0.0, -0.4, 0.0, 0.0, 0.0]);
+        let inv = Pose {
+            t: mat_vec(&inv.r, &truth.t).map(|v| -v),
+            ..inv
+        };
+        let source = moved(&target, &inv);
+        let opts = RegisterOptions {
+            four_dof: true,
+            ..Default::default()
+        };
+        let r = register(&source, &target, Some(Pose::IDENTITY), None, &opts).unwrap();
+        assert!(error(&r.transform, &truth) < 1e-4);
+        assert_eq!(r.transform.r[2], [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn rejects_empty_and_non_finite() {
+        let g = scene();
+        let empty = Gmm {
+            weights: vec![],
+            means: vec![],
+            covariances: vec![],
+        };
+        let o = RegisterOptions::default();
+        assert!(register(&empty, &g, None, None, &o).is_err());
+        let mut bad = g.clone();
+        bad.means[0][1] = f64::NAN;
+        assert!(register(&bad, &g, None, None, &o).is_err());
+    }
+}
