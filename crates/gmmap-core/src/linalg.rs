@@ -71,6 +71,12 @@ impl Sym3 {
 
     /// Inverse and log-determinant via Cholesky (so it fails loudly on non-PD input).
     pub fn inverse_logdet(&self) -> Option<(Sym3, f64)> {
+        let (inv, root) = self.inverse_sqrt_det()?;
+        Some((inv, 2.0 * root.ln()))
+    }
+
+    /// Inverse and sqrt(det) via Cholesky: densities need 1/sqrt(det), and no logarithm.
+    pub fn inverse_sqrt_det(&self) -> Option<(Sym3, f64)> {
         let [a, b, c, d, e, f] = self.cholesky()?;
         // Invert the lower factor L, then Σ⁻¹ = L⁻ᵀ L⁻¹.
         let (i00, i11, i22) = (1.0 / a, 1.0 / c, 1.0 / f);
@@ -85,7 +91,7 @@ impl Sym3 {
             yz: i21 * i22,
             zz: i22 * i22,
         };
-        Some((inv, 2.0 * (a.ln() + c.ln() + f.ln())))
+        Some((inv, a * c * f))
     }
 
     /// dᵀ M d.

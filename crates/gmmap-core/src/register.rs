@@ -13,12 +13,14 @@
 //! scale and the best is refined. C at the end is the geometric confidence; H (scaled) is the
 //! information matrix of the estimate.
 
+use crate::fastmath::exp_nonpos;
 use crate::gmm::Gmm;
 use crate::linalg::Sym3;
 use crate::CoreError;
 use rayon::prelude::*;
 
-const LOG_2PI: f64 = 1.837_877_066_409_345_5;
+/// (2π)^(-3/2), the normaliser of a 3-D Gaussian without its determinant.
+const INV_2PI_15: f64 = 0.063_493_635_934_240_97;
 
 #[derive(Debug, Clone)]
 pub struct RegisterOptions {
@@ -41,9 +43,9 @@ pub struct RegisterOptions {
 impl Default for RegisterOptions {
     fn default() -> Self {
         RegisterOptions {
-            scales: vec![0.5, 0.2, 0.08, 0.0],
-            max_iter: 30,
-            tol: 1e-7,
+            scales: vec![0.3, 0.1, 0.03, 0.0],
+            max_iter: 10,
+            tol: 1e-5,
             four_dof: false,
             yaw_starts: 12,
             cutoff: 6.0,
@@ -169,7 +171,12 @@ fn rotate_cov(r: &[[f64; 3]; 3], s: &Sym3) -> Sym3 {
 struct Eval {
     f: f64,
     grad: [f64; 6],
+    /// Σ w Jᵀ P J (upper triangle): the Gauss-Newton part of the curvature.
     h: [[f64; 6]; 6],
+    /// Σ w g gᵀ of the pairs' log-gradients (upper triangle): with it the Newton curvature of
+    /// log F is h − ggᵀ-terms, whose steps converge in a few iterations where Gauss-Newton alone
+    /// (an EM-like fixed point) creeps linearly.
+    gg: [[f64; 6]; 6],
 }
 
 impl Eval {
@@ -177,6 +184,7 @@ impl Eval {
         f: 0.0,
         grad: [0.0; 6],
         h: [[0.0; 6]; 6],
+        gg: [[0.0; 6]; 6],
     };
 
     fn add(mut self, o: &Eval) -> Eval {
@@ -185,6 +193,7 @@ impl Eval {
             self.grad[a] += o.grad[a];
             for b in 0..6 {
                 self.h[a][b] += o.h[a][b];
+                self.gg[a][b] += o.gg[a][b];
             }
         }
         self
@@ -198,6 +207,26 @@ struct Problem<'a> {
     source: &'a Gmm,
     target: &'a Gmm,
     cutoff2: f64,
+    /// Largest eigenvalue of each covariance (rotation-invariant): with them, |e|² beyond
+    /// cutoff² · (λᵢ + λⱼ + 2s²) proves a pair negligible without inverting anything.
+    source_reach: Vec<f64>,
+    target_reach: Vec<f64>,
+}
+
+fn largest_eigenvalues(g: &Gmm) -> Vec<f64> {
+    g.covariances.iter().map(|c| c.eigen().0[2]).collect()
+}
+
+impl<'a> Problem<'a> {
+    fn new(source: &'a Gmm, target: &'a Gmm, cutoff: f64) -> Problem<'a> {
+        Problem {
+            source,
+            target,
+            cutoff2: cutoff * cutoff,
+            source_reach: largest_eigenvalues(source),
+            target_reach: largest_eigenvalues(target),
+        }
+    }
 }
 
 impl Problem<'_> {
@@ -211,17 +240,22 @@ impl Problem<'_> {
                 let mut acc = Eval::ZERO;
                 for &i in rows {
                     let p = pose.apply(&src.means[i]);
-                    let sr = rotate_cov(&pose.r, &src.covariances[i]);
+                    let mut rotated = None;
                     for j in 0..tgt.len() {
-                        self.pair(
-                            &mut acc,
-                            src.weights[i] * tgt.weights[j],
-                            &p,
-                            &sr,
-                            j,
-                            s2,
-                            derivs,
-                        );
+                        let nu = &tgt.means[j];
+                        let e = [p[0] - nu[0], p[1] - nu[1], p[2] - nu[2]];
+                        let e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+                        if e2
+                            > self.cutoff2
+                                * (self.source_reach[i] + self.target_reach[j] + 2.0 * s2)
+                        {
+                            continue;
+                        }
+                        let sr = *rotated
+                            .get_or_insert_with(|| rotate_cov(&pose.r, &src.covariances[i]));
+                        let s = sr.add(&tgt.covariances[j]).add_diag(2.0 * s2);
+                        let w0 = src.weights[i] * tgt.weights[j];
+                        pair(&mut acc, w0, &p, e, &sr, &s, self.cutoff2, derivs);
                     }
                 }
                 acc
@@ -229,68 +263,65 @@ impl Problem<'_> {
             .collect();
         parts.iter().fold(Eval::ZERO, |a, b| a.add(b))
     }
+}
 
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn pair(
-        &self,
-        acc: &mut Eval,
-        w0: f64,
-        p: &[f64; 3],
-        sr: &Sym3,
-        j: usize,
-        s2: f64,
-        derivs: bool,
-    ) {
-        let nu = &self.target.means[j];
-        let e = [p[0] - nu[0], p[1] - nu[1], p[2] - nu[2]];
-        let s = sr.add(&self.target.covariances[j]).add_diag(2.0 * s2);
-        // Cheap rejection: the Mahalanobis distance is at least |e|² / trace(S).
-        let e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
-        if e2 > self.cutoff2 * (s.xx + s.yy + s.zz) {
-            return;
-        }
-        let Some((prec, logdet)) = s.inverse_logdet() else {
-            return;
-        };
-        let q = prec.mul_vec(e);
-        let m = e[0] * q[0] + e[1] * q[1] + e[2] * q[2];
-        let w = w0 * (-0.5 * (m + logdet + 3.0 * LOG_2PI)).exp();
-        acc.f += w;
-        if !derivs {
-            return;
-        }
-        // d log w / dω = q × p + (Σ'q) × q − vee(Σ'P − PΣ')/2 ; d log w / dv = −q.
-        let sq = sr.mul_vec(q);
-        let (a, b) = (cross(&q, p), cross(&sq, &q));
-        let sp = sym_mul(sr, &prec);
-        let asym = [
-            sp[1][2] - sp[2][1],
-            sp[2][0] - sp[0][2],
-            sp[0][1] - sp[1][0],
-        ];
-        let g = [
-            a[0] + b[0] - asym[0],
-            a[1] + b[1] - asym[1],
-            a[2] + b[2] - asym[2],
-            -q[0],
-            -q[1],
-            -q[2],
-        ];
-        for k in 0..6 {
-            acc.grad[k] += w * g[k];
-        }
-        // Gauss-Newton metric: Jᵀ P J with J = [−[p]ₓ, I].
-        let jac = jacobian(p);
-        let pm = prec.to_rows();
-        let pj: [[f64; 6]; 3] = [0, 1, 2].map(|r| {
-            [0, 1, 2, 3, 4, 5].map(|c| (0..3).map(|k| pm[3 * r + k] * jac[k][c]).sum::<f64>())
-        });
-        for x in 0..6 {
-            for y in x..6 {
-                let v: f64 = (0..3).map(|k| jac[k][x] * pj[k][y]).sum();
-                acc.h[x][y] += w * v;
-            }
+/// Adds one pair's term (source mean moved to `p`, residual `e`, rotated source covariance
+/// `sr`, total covariance `s`) and, if asked, its gradient and Gauss-Newton terms.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn pair(
+    acc: &mut Eval,
+    w0: f64,
+    p: &[f64; 3],
+    e: [f64; 3],
+    sr: &Sym3,
+    s: &Sym3,
+    cutoff2: f64,
+    derivs: bool,
+) {
+    let Some((prec, root_det)) = s.inverse_sqrt_det() else {
+        return;
+    };
+    let q = prec.mul_vec(e);
+    let m = e[0] * q[0] + e[1] * q[1] + e[2] * q[2];
+    if m > cutoff2 {
+        return; // exp(-m/2) is negligible: skip the derivative work too
+    }
+    let w = w0 * INV_2PI_15 / root_det * exp_nonpos(-0.5 * m);
+    acc.f += w;
+    if !derivs {
+        return;
+    }
+    // d log w / dω = q × p + (Σ'q) × q − vee(Σ'P − PΣ')/2 ; d log w / dv = −q.
+    let sq = sr.mul_vec(q);
+    let (a, b) = (cross(&q, p), cross(&sq, &q));
+    let sp = sym_mul(sr, &prec);
+    let asym = [
+        sp[1][2] - sp[2][1],
+        sp[2][0] - sp[0][2],
+        sp[0][1] - sp[1][0],
+    ];
+    let g = [
+        a[0] + b[0] - asym[0],
+        a[1] + b[1] - asym[1],
+        a[2] + b[2] - asym[2],
+        -q[0],
+        -q[1],
+        -q[2],
+    ];
+    for (acc_g, gk) in acc.grad.iter_mut().zip(g) {
+        *acc_g += w * gk;
+    }
+    // Gauss-Newton metric: Jᵀ P J with J = [−[p]ₓ, I].
+    let jac = jacobian(p);
+    let pm = prec.to_rows();
+    let pj: [[f64; 6]; 3] = [0, 1, 2].map(|r| {
+        [0, 1, 2, 3, 4, 5].map(|c| (0..3).map(|k| pm[3 * r + k] * jac[k][c]).sum::<f64>())
+    });
+    for (x, (row, grow)) in acc.h.iter_mut().zip(acc.gg.iter_mut()).enumerate() {
+        for (y, (h, gg)) in row.iter_mut().zip(grow.iter_mut()).enumerate().skip(x) {
+            *h += w * (0..3).map(|k| jac[k][x] * pj[k][y]).sum::<f64>();
+            *gg += w * g[x] * g[y];
         }
     }
 }
@@ -316,10 +347,7 @@ fn solve_spd(a: &[[f64; 6]; 6], b: &[f64; 6], idx: &[usize]) -> Option<[f64; 6]>
     let mut l = [[0.0; 6]; 6];
     for i in 0..n {
         for j in 0..=i {
-            let mut s = a[idx[i]][idx[j]];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
+            let s = a[idx[i]][idx[j]] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
             if i == j {
                 if s <= 0.0 || !s.is_finite() {
                     return None;
@@ -345,10 +373,34 @@ fn solve_spd(a: &[[f64; 6]; 6], b: &[f64; 6], idx: &[usize]) -> Option<[f64; 6]>
     Some(out)
 }
 
-fn symmetrise(h: &mut [[f64; 6]; 6]) {
+/// −∇² log F ≈ (Σ w JᵀPJ − Σ w g gᵀ)/F + ḡ ḡᵀ (ḡ = ∇F/F), the second-order terms of the
+/// covariance rotation left out; the Gauss-Newton part alone where that is not positive.
+fn newton_metric(e: &Eval) -> [[f64; 6]; 6] {
+    let mean = e.grad.map(|g| g / e.f);
+    let mut gn = e.h.map(|r| r.map(|v| v / e.f));
+    symmetrise(&mut gn);
+    let mut gg = e.gg;
+    symmetrise(&mut gg);
+    let mut newton = gn;
     for x in 0..6 {
-        for y in 0..x {
-            h[x][y] = h[y][x];
+        for y in 0..6 {
+            newton[x][y] += mean[x] * mean[y] - gg[x][y] / e.f;
+        }
+    }
+    let positive = solve_spd(&newton, &[0.0; 6], &[0, 1, 2, 3, 4, 5]).is_some();
+    if positive {
+        newton
+    } else {
+        gn
+    }
+}
+
+/// Copies the upper triangle (the one accumulated) into the lower.
+fn symmetrise(h: &mut [[f64; 6]; 6]) {
+    let upper = *h;
+    for (x, row) in h.iter_mut().enumerate() {
+        for (y, v) in row.iter_mut().enumerate().take(x) {
+            *v = upper[y][x];
         }
     }
 }
@@ -367,8 +419,7 @@ impl Problem<'_> {
         while iters < opts.max_iter && cur.f > 0.0 {
             iters += 1;
             let grad = cur.grad.map(|g| g / cur.f);
-            let mut h = cur.h.map(|r| r.map(|v| v / cur.f));
-            symmetrise(&mut h);
+            let h = newton_metric(&cur);
             let mut accepted = false;
             for _ in 0..12 {
                 let mut damped = h;
@@ -380,13 +431,15 @@ impl Problem<'_> {
                     continue;
                 };
                 let next = pose.perturbed(&step);
-                let trial = self.evaluate(&next, s2, true);
-                if trial.f > cur.f {
+                // Only the value decides; derivatives are computed for accepted steps.
+                let f = self.evaluate(&next, s2, false).f;
+                if f > cur.f {
                     let size = step.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    // Done once steps or gains become negligible.
+                    accepted = size > opts.tol && f - cur.f > 1e-6 * f;
                     pose = next;
-                    cur = trial;
+                    cur = self.evaluate(&next, s2, true);
                     lambda = (lambda / 3.0).max(1e-9);
-                    accepted = size > opts.tol;
                     break;
                 }
                 lambda *= 4.0;
@@ -444,11 +497,7 @@ pub fn register(
             "scales must be finite and >= 0".into(),
         ));
     }
-    let problem = Problem {
-        source,
-        target,
-        cutoff2: opts.cutoff * opts.cutoff,
-    };
+    let problem = Problem::new(source, target, opts.cutoff);
     let coarse = opts.scales[0] * opts.scales[0];
     let mut iterations = 0;
     let start = match init {
@@ -590,11 +639,7 @@ mod tests {
     #[test]
     fn confidence_is_one_for_itself_and_falls_with_misalignment() {
         let g = scene();
-        let p = Problem {
-            source: &g,
-            target: &g,
-            cutoff2: 1e9,
-        };
+        let p = Problem::new(&g, &g, 1e5);
         let norm = g.l2_inner(&g).unwrap();
         let c = |pose: &Pose| p.evaluate(pose, 0.0, false).f / norm;
         assert!((c(&Pose::IDENTITY) - 1.0).abs() < 1e-12);
@@ -613,11 +658,7 @@ mod tests {
             &g,
             &Pose::IDENTITY.perturbed(&[0.1, 0.05, -0.2, 0.1, 0.05, 0.0]),
         );
-        let p = Problem {
-            source: &src,
-            target: &g,
-            cutoff2: 1e9,
-        };
+        let p = Problem::new(&src, &g, 1e5);
         let pose = Pose::IDENTITY.perturbed(&[0.02, -0.03, 0.05, 0.01, -0.02, 0.03]);
         for s2 in [0.0, 0.01] {
             let e = p.evaluate(&pose, s2, true);
