@@ -5,13 +5,14 @@
 //! ∫ T(f) g = Σᵢⱼ πᵢ ρⱼ N(Rμᵢ + t; νⱼ, RΣᵢRᵀ + Λⱼ) in closed form, and the norms do not depend
 //! on T, so the optimiser maximises log F(T), F = ∫ T(f) g. The gradient with respect to a left
 //! perturbation T ← exp(ξ)·T, ξ = (ω, v), is analytic, including the rotation of the source
-//! covariances; the step is Levenberg-Marquardt on the Gauss-Newton metric
-//! H = Σ wᵢⱼ Jᵢⱼᵀ Sᵢⱼ⁻¹ Jᵢⱼ / F (Jᵢⱼ = ∂e/∂ξ = [−[p]ₓ, I]), accepted only when F grows.
+//! covariances; the step is Levenberg-Marquardt on a Newton metric, the Gauss-Newton part
+//! H = Σ wᵢⱼ Jᵢⱼᵀ Sᵢⱼ⁻¹ Jᵢⱼ / F (Jᵢⱼ = ∂e/∂ξ = [−[p]ₓ, I]) less the covariance of the pairs'
+//! gradients (H alone where that is not positive), accepted only when F grows.
 //! Coarse to fine: an isotropic variance s² is added to every covariance of both mixtures, for
 //! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
 //! `yaw_starts` rotations about +z (gravity) with the centroids aligned are tried at the coarsest
-//! scale and the best is refined. C at the end is the geometric confidence; H (scaled) is the
-//! information matrix of the estimate.
+//! scale and the best is refined. C at the end (measured with `confidence_scale` added to all
+//! covariances) is the geometric confidence; H (scaled) is the information matrix.
 
 use crate::fastmath::exp_nonpos;
 use crate::gmm::Gmm;
@@ -38,6 +39,9 @@ pub struct RegisterOptions {
     pub cutoff: f64,
     /// Multiplies the Gauss-Newton metric to give the information matrix.
     pub information_scale: f64,
+    /// Standard deviation added to every covariance when the confidence is measured, so that
+    /// C reflects the shared geometry rather than how sharply each side was fitted.
+    pub confidence_scale: f64,
 }
 
 impl Default for RegisterOptions {
@@ -50,6 +54,7 @@ impl Default for RegisterOptions {
             yaw_starts: 12,
             cutoff: 6.0,
             information_scale: 1.0,
+            confidence_scale: 0.05,
         }
     }
 }
@@ -452,6 +457,14 @@ impl Problem<'_> {
     }
 }
 
+/// The mixture with `s2` added to every variance.
+fn inflated(g: &Gmm, s2: f64) -> Gmm {
+    Gmm {
+        covariances: g.covariances.iter().map(|c| c.add_diag(s2)).collect(),
+        ..g.clone()
+    }
+}
+
 fn weighted_mean(g: &Gmm) -> [f64; 3] {
     let mut m = [0.0; 3];
     for (w, mu) in g.weights.iter().zip(&g.means) {
@@ -531,7 +544,10 @@ pub fn register(
         iterations += it;
     }
     let fin = problem.evaluate(&pose, 0.0, true);
-    let norm = (source.l2_inner(source)? * target.l2_inner(target)?).sqrt();
+    let c2 = opts.confidence_scale * opts.confidence_scale;
+    let (fs, gs) = (inflated(source, c2), inflated(target, c2));
+    let norm = (fs.l2_inner(&fs)? * gs.l2_inner(&gs)?).sqrt();
+    let overlap = problem.evaluate(&pose, c2, false).f;
     let mut h = fin.h;
     symmetrise(&mut h);
     let scale = if fin.f > 0.0 {
@@ -541,7 +557,7 @@ pub fn register(
     };
     Ok(Registration {
         transform: pose,
-        confidence: (fin.f / norm).clamp(0.0, 1.0),
+        confidence: (overlap / norm).clamp(0.0, 1.0),
         information: h.map(|r| r.map(|v| v * scale)),
         iterations,
     })

@@ -228,7 +228,7 @@ type RegisterOutput<'py> = (
 /// GMM-to-GMM registration: (transform 4x4, confidence, information 6x6, iterations).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale))]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale))]
 fn register_gmm<'py>(
     py: Python<'py>,
     source: (
@@ -248,6 +248,7 @@ fn register_gmm<'py>(
     four_dof: bool,
     yaw_starts: usize,
     information_scale: f64,
+    confidence_scale: f64,
 ) -> PyResult<RegisterOutput<'py>> {
     let (f, g) = (
         gmm_of(source.0, source.1, source.2)?,
@@ -262,6 +263,7 @@ fn register_gmm<'py>(
         four_dof,
         yaw_starts,
         information_scale,
+        confidence_scale,
         ..Default::default()
     };
     let r = in_pool(py, || register(&f, &g, init, yaw_hint, &opts)).map_err(value_error)?;

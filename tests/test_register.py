@@ -1,0 +1,65 @@
+import numpy as np
+import pytest
+
+import gmmap
+from gmmap import Gmm, InvalidInputError, fit_gmm, register
+from gmmap.register import confidence
+
+
+def rigid(yaw: float, t, roll: float = 0.0) -> np.ndarray:
+    cz, sz, cx, sx = np.cos(yaw), np.sin(yaw), np.cos(roll), np.sin(roll)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, cx, -sx], [0, sx, cx]]
+    )
+    T[:3, 3] = t
+    return T
+
+
+@pytest.fixture(scope="module")
+def scene(slice_points):
+    return fit_gmm(slice_points, 60, "full")
+
+
+def test_recovers_a_known_transform(scene):
+    truth = rigid(0.2, [0.1, -0.08, 0.05], roll=0.05)
+    source = scene.transform(np.linalg.inv(truth))
+    r = register(source, scene, np.eye(4))
+    np.testing.assert_allclose(r.transform, truth, atol=1e-4)
+    assert r.confidence > 0.999
+    assert r.information.shape == (6, 6)
+    np.testing.assert_allclose(r.information, r.information.T, atol=1e-9)
+    assert np.all(np.linalg.eigvalsh(r.information) > 0)
+
+
+def test_finds_the_pose_without_a_guess_and_in_4dof(scene):
+    truth = rigid(2.3, [0.4, -0.3, 0.0])  # 132°: far from any local basin of the identity
+    source = scene.transform(np.linalg.inv(truth))
+    np.testing.assert_allclose(register(source, scene).transform, truth, atol=1e-4)
+    r4 = register(source, scene, dof=4, yaw_hint=2.0)
+    np.testing.assert_allclose(r4.transform, truth, atol=1e-4)
+
+
+def test_confidence_is_one_for_itself_and_falls_with_misalignment(scene):
+    assert confidence(scene, scene) == pytest.approx(1.0, abs=1e-12)
+    values = [confidence(scene, scene, rigid(0.0, [d, 0, 0])) for d in (0.02, 0.05, 0.1, 0.2)]
+    assert all(a > b for a, b in zip([1.0, *values], values, strict=False))
+
+
+def test_confidence_does_not_depend_on_component_count(slice_points):
+    few, many = fit_gmm(slice_points, 50, "full"), fit_gmm(slice_points, 150, "full")
+    assert confidence(few, many) == pytest.approx(1.0, abs=0.05)
+    assert register(few, many, np.eye(4)).confidence == pytest.approx(1.0, abs=0.05)
+
+
+def test_bad_input_raises_clear_errors(scene):
+    with pytest.raises(InvalidInputError, match=r"gmmap\.Gmm"):
+        register(np.zeros((3, 3)), scene)
+    with pytest.raises(InvalidInputError, match="dof"):
+        register(scene, scene, dof=5)
+    with pytest.raises(InvalidInputError, match="4x4"):
+        register(scene, scene, np.eye(3))
+    with pytest.raises(InvalidInputError, match="finite"):
+        register(scene, scene, yaw_hint=float("nan"))
+    with pytest.raises(gmmap.InvalidGmmError):
+        Gmm([], np.zeros((0, 3)), np.zeros((0, 3, 3)))  # an empty mixture cannot even exist
