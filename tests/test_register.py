@@ -63,3 +63,45 @@ def test_bad_input_raises_clear_errors(scene):
         register(scene, scene, yaw_hint=float("nan"))
     with pytest.raises(gmmap.InvalidGmmError):
         Gmm([], np.zeros((0, 3)), np.zeros((0, 3, 3)))  # an empty mixture cannot even exist
+
+
+def test_eval_registration_command_prints_table_one(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from gmmap.cli import main
+    from gmmap.datasets import BUNDLED_TUM_SLICE
+
+    args = [
+        "eval",
+        "registration",
+        str(BUNDLED_TUM_SLICE),
+        "--frames-per-submap",
+        "2",
+        "--stride",
+        "4",
+        "--json",
+    ]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["pairs"] == 3
+    keys = {"t_error_mean", "t_rmse", "r_error_mean", "r_rmse", "success_rate", "time_per_pair_s"}
+    assert set(out["methods"]) == {"points", "gmm-merge", "per-frame", "gicp"}
+    for m in out["methods"].values():
+        assert keys == set(m) and 0.0 <= m["success_rate"] <= 1.0
+    # The slice's frames are 1.3 s apart (up to 20 cm): errors stay well under that motion.
+    assert all(m["t_error_mean"] < 0.3 for m in out["methods"].values())
+
+
+def test_global_mode_recovers_random_perturbations(slice_points):
+    from gmmap.eval.registration import pose_errors, random_perturbation
+
+    g = fit_gmm(slice_points, 60, "full")
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        P = random_perturbation(rng)
+        r = register(g.transform(P), g)
+        t, deg = pose_errors(r.transform, np.linalg.inv(P))
+        assert t < 1e-3 and deg < 0.05

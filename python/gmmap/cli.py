@@ -304,6 +304,88 @@ def build(
     click.echo(f"{len(submaps)} submaps → {out}")
 
 
+@main.group("eval")
+def evaluate() -> None:
+    """The paper's experiments against ground truth (Table I, …)."""
+
+
+@evaluate.command("registration")
+@click.argument("path", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--frames-per-submap",
+    default=5,
+    show_default=True,
+    help="Frames per submap (the paper's Table I: 5; KITTI scans: 1).",
+)
+@click.option(
+    "--methods",
+    default="points,gmm-merge,per-frame,gicp",
+    show_default=True,
+    help="Comma-separated: points, gmm-merge, per-frame, gicp.",
+)
+@click.option(
+    "--global",
+    "global_mode",
+    is_flag=True,
+    help="Perturb each pair by a random yaw and ≤1 m and register with no guess.",
+)
+@click.option("--max-pairs", type=int, help="Evaluate only the first pairs.")
+@click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
+@click.option("--voxel", default=0.05, show_default=True, help="Submap voxel size (m).")
+@click.option("--seed", default=0, show_default=True, help="Seeds the global perturbations.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def eval_registration(
+    path: Path,
+    frames_per_submap: int,
+    methods: str,
+    global_mode: bool,
+    max_pairs: int | None,
+    stride: int | None,
+    voxel: float,
+    seed: int,
+    as_json: bool,
+) -> None:
+    """Register consecutive submaps and compare with ground truth (the paper's Table I)."""
+    from gmmap import datasets
+    from gmmap.eval.registration import METHODS, evaluate_registration
+    from gmmap.submap import BuildOptions
+
+    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    unknown = sorted(set(chosen) - set(METHODS))
+    if unknown:
+        raise click.BadParameter(
+            f"unknown {unknown}; choose from {', '.join(METHODS)}", param_hint="--methods"
+        )
+    if "gicp" in chosen:
+        try:
+            import small_gicp  # noqa: F401
+        except ImportError:
+            _log("small_gicp is not installed (pip install small_gicp): skipping gicp")
+            chosen.remove("gicp")
+    frames = datasets.open(path, **({"stride": stride} if stride else {}))
+    options = BuildOptions(covariance="full", voxel_size=voxel)
+    r = evaluate_registration(
+        frames, frames_per_submap, chosen, global_mode, max_pairs, options, seed, progress=_log
+    )
+    if as_json:
+        click.echo(json.dumps(r))
+        return
+    click.echo(
+        f"{r['pairs']} pairs of {frames_per_submap}-frame submaps"
+        f"{' (global: no initial guess)' if global_mode else ''}"
+    )
+    click.echo(
+        f"{'method':<10} {'t mean (m)':>10} {'t RMSE (m)':>10} {'r mean (°)':>10} "
+        f"{'r RMSE (°)':>10} {'success':>8} {'time/pair':>10}"
+    )
+    for name, m in r["methods"].items():
+        click.echo(
+            f"{name:<10} {m['t_error_mean']:>10.4f} {m['t_rmse']:>10.4f} "
+            f"{m['r_error_mean']:>10.3f} {m['r_rmse']:>10.3f} "
+            f"{m['success_rate']:>8.1%} {m['time_per_pair_s'] * 1e3:>8.1f} ms"
+        )
+
+
 @main.group()
 def bench() -> None:
     """Benchmarks against named baselines (ratios, measured in one run)."""

@@ -1,0 +1,1 @@
+"""Evaluation harnesses: the paper's experiments on real and simulated data."""
