@@ -333,6 +333,18 @@ def evaluate() -> None:
 @click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
 @click.option("--voxel", default=0.05, show_default=True, help="Submap voxel size (m).")
 @click.option("--seed", default=0, show_default=True, help="Seeds the global perturbations.")
+@click.option("--scales", help="Registration coarse-to-fine ladder, e.g. 0.5,0.1,0 (metres).")
+@click.option(
+    "--odometry-guess",
+    is_flag=True,
+    help="Start from the odometry's relative pose instead of the identity.",
+)
+@click.option(
+    "--drift",
+    type=float,
+    help="Simulate odometry drift of this fraction of the distance (datasets whose "
+    "poses are ground truth), with the default rotation drift.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def eval_registration(
     path: Path,
@@ -343,6 +355,9 @@ def eval_registration(
     stride: int | None,
     voxel: float,
     seed: int,
+    scales: str | None,
+    odometry_guess: bool,
+    drift: float | None,
     as_json: bool,
 ) -> None:
     """Register consecutive submaps and compare with ground truth (the paper's Table I)."""
@@ -362,10 +377,26 @@ def eval_registration(
         except ImportError:
             _log("small_gicp is not installed (pip install small_gicp): skipping gicp")
             chosen.remove("gicp")
-    frames = datasets.open(path, **({"stride": stride} if stride else {}))
+    loader_options: dict = {"stride": stride} if stride else {}
+    if drift is not None:
+        loader_options["drift"] = datasets.Drift(translation=drift)
+    frames = datasets.open(path, **loader_options)
     options = BuildOptions(covariance="full", voxel_size=voxel)
+    try:
+        ladder = tuple(float(v) for v in scales.split(",")) if scales else None
+    except ValueError:
+        raise click.BadParameter("comma-separated numbers", param_hint="--scales") from None
     r = evaluate_registration(
-        frames, frames_per_submap, chosen, global_mode, max_pairs, options, seed, progress=_log
+        frames,
+        frames_per_submap,
+        chosen,
+        global_mode,
+        max_pairs,
+        options,
+        seed,
+        _log,
+        ladder,
+        odometry_guess,
     )
     if as_json:
         click.echo(json.dumps(r))

@@ -23,7 +23,10 @@ from gmmap import _core
 from gmmap.errors import InvalidInputError
 from gmmap.gmm import Gmm, _rigid
 
-DEFAULT_SCALES = (0.3, 0.1, 0.03, 0.0)
+# Coarse to fine (metres added as a standard deviation): a guess needs only a short ladder; a
+# global search starts wide, where the yaw starts are compared.
+LOCAL_SCALES = (0.05, 0.0)
+GLOBAL_SCALES = (0.3, 0.1, 0.03, 0.0)
 CONFIDENCE_SCALE = 0.05
 
 
@@ -51,7 +54,7 @@ def register(
     *,
     yaw_hint: float | None = None,
     dof: int = 6,
-    scales: tuple[float, ...] = DEFAULT_SCALES,
+    scales: tuple[float, ...] | None = None,
     max_iter: int = 10,
     yaw_starts: int = 12,
     information_scale: float | None = None,
@@ -64,6 +67,7 @@ def register(
         yaw_hint: with ``init`` None, start near this yaw (radians, e.g. from place recognition).
         dof: 6, or 4 for ground robots (x, y, z, yaw; roll and pitch as given by ``init``).
         scales: standard deviations added to all covariances, coarse to fine; end with 0.
+            Default: (0.05, 0) with ``init``, (0.3, 0.1, 0.03, 0) for a global search.
         max_iter: Levenberg-Marquardt iterations per scale at most.
         confidence_scale: standard deviation added to all covariances when the confidence is
             measured (see `confidence`).
@@ -76,6 +80,8 @@ def register(
         R, t = _rigid(init)
         init = np.eye(4)
         init[:3, :3], init[:3, 3] = R, t
+    if scales is None:
+        scales = LOCAL_SCALES if init is not None else GLOBAL_SCALES
     if not all(np.isfinite(s) and s >= 0 for s in (*scales, confidence_scale)) or not scales:
         raise InvalidInputError("scales and confidence_scale must be finite and >= 0")
     if yaw_hint is not None and not np.isfinite(yaw_hint):

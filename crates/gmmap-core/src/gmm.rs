@@ -123,6 +123,12 @@ impl Gmm {
                 (0..other.len())
                     .map(|j| {
                         let cov = self.covariances[i].add(&other.covariances[j]);
+                        let e = sub(&self.means[i], &other.means[j]);
+                        let e2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+                        // eᵀS⁻¹e ≥ (eᵀe)²/eᵀSe: beyond 8σ the term is below e⁻³² of its peak.
+                        if e2 * e2 > 64.0 * cov.quad(e) {
+                            return 0.0;
+                        }
                         let w = self.weights[i] * other.weights[j];
                         Prepared::new(w, other.means[j], &cov)
                             .map_or(0.0, |p| p.log_term(&self.means[i]).exp())

@@ -52,7 +52,7 @@ impl Default for RegisterOptions {
             tol: 1e-5,
             four_dof: false,
             yaw_starts: 12,
-            cutoff: 6.0,
+            cutoff: 4.0,
             information_scale: 1.0,
             confidence_scale: 0.05,
         }
@@ -259,6 +259,12 @@ impl Problem<'_> {
                         let sr = *rotated
                             .get_or_insert_with(|| rotate_cov(&pose.r, &src.covariances[i]));
                         let s = sr.add(&tgt.covariances[j]).add_diag(2.0 * s2);
+                        // Tighter, still without an inverse: eᵀS⁻¹e ≥ (eᵀe)² / eᵀSe
+                        // (Cauchy-Schwarz), sharp along e: it drops the many pairs lying
+                        // beside each other's thin axis.
+                        if e2 * e2 > self.cutoff2 * s.quad(e) {
+                            continue;
+                        }
                         let w0 = src.weights[i] * tgt.weights[j];
                         pair(&mut acc, w0, &p, e, &sr, &s, self.cutoff2, derivs);
                     }
