@@ -212,14 +212,23 @@ struct Problem<'a> {
     source: &'a Gmm,
     target: &'a Gmm,
     cutoff2: f64,
-    /// Largest eigenvalue of each covariance (rotation-invariant): with them, |e|² beyond
+    /// Bounds of each covariance's largest eigenvalue (rotation-invariant): with them, |e|² beyond
     /// cutoff² · (λᵢ + λⱼ + 2s²) proves a pair negligible without inverting anything.
     source_reach: Vec<f64>,
     target_reach: Vec<f64>,
 }
 
+/// Upper bounds of each covariance's largest eigenvalue (Gershgorin: no decomposition).
 fn largest_eigenvalues(g: &Gmm) -> Vec<f64> {
-    g.covariances.iter().map(|c| c.eigen().0[2]).collect()
+    let bound = |c: &Sym3| {
+        let rows = [
+            c.xx + c.xy.abs() + c.xz.abs(),
+            c.yy + c.xy.abs() + c.yz.abs(),
+            c.zz + c.xz.abs() + c.yz.abs(),
+        ];
+        rows[0].max(rows[1]).max(rows[2])
+    };
+    g.covariances.iter().map(bound).collect()
 }
 
 impl<'a> Problem<'a> {
