@@ -216,16 +216,18 @@ fn positive_sqrt(v: f64) -> Option<f64> {
 mod tests {
     use super::*;
 
+    const SAMPLE: Sym3 = Sym3 {
+        xx: 4.0,
+        yy: 3.0,
+        zz: 2.0,
+        xy: 0.5,
+        xz: -0.3,
+        yz: 0.2,
+    };
+
     #[test]
     fn inverse_times_matrix_is_identity() {
-        let m = Sym3 {
-            xx: 4.0,
-            yy: 3.0,
-            zz: 2.0,
-            xy: 0.5,
-            xz: -0.3,
-            yz: 0.2,
-        };
+        let m = SAMPLE;
         let (inv, logdet) = m.inverse_logdet().unwrap();
         let (a, b) = (m.to_rows(), inv.to_rows());
         for i in 0..3 {
@@ -239,14 +241,7 @@ mod tests {
 
     #[test]
     fn eigen_reconstructs_the_matrix() {
-        let m = Sym3 {
-            xx: 4.0,
-            yy: 3.0,
-            zz: 2.0,
-            xy: 0.5,
-            xz: -0.3,
-            yz: 0.2,
-        };
+        let m = SAMPLE;
         let (w, v) = m.eigen();
         assert!(w[0] <= w[1] && w[1] <= w[2]);
         let rows = m.to_rows();

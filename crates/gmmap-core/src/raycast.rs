@@ -684,28 +684,36 @@ mod tests {
             .is_none());
     }
 
+    /// `n` yawed boxes (centres up to `height`) and `n` pillars scattered over 9 x 7 m.
+    fn clutter(n: usize, height: f64) -> Vec<Shape> {
+        (0..n)
+            .flat_map(|i| {
+                let f = i as f64;
+                [
+                    Shape::Box {
+                        centre: [
+                            (f * 1.7) % 9.0 - 4.5,
+                            (f * 2.3) % 7.0 - 3.5,
+                            (f * 0.9) % height,
+                        ],
+                        half: [0.2 + (f % 3.0) * 0.1, 0.3, 0.25],
+                        yaw: f * 0.3,
+                    },
+                    Shape::Cylinder {
+                        x: (f * 3.1) % 9.0 - 4.5,
+                        y: (f * 1.3) % 7.0 - 3.5,
+                        radius: 0.15,
+                        z_min: 0.0,
+                        z_max: 2.0,
+                    },
+                ]
+            })
+            .collect()
+    }
+
     #[test]
     fn bvh_matches_brute_force() {
-        let mut shapes = Vec::new();
-        for i in 0..60 {
-            let f = i as f64;
-            shapes.push(Shape::Box {
-                centre: [
-                    (f * 1.7) % 9.0 - 4.5,
-                    (f * 2.3) % 7.0 - 3.5,
-                    (f * 0.9) % 3.0,
-                ],
-                half: [0.2 + (f % 3.0) * 0.1, 0.3, 0.25],
-                yaw: f * 0.3,
-            });
-            shapes.push(Shape::Cylinder {
-                x: (f * 3.1) % 9.0 - 4.5,
-                y: (f * 1.3) % 7.0 - 3.5,
-                radius: 0.15,
-                z_min: 0.0,
-                z_max: 2.0,
-            });
-        }
+        let shapes = clutter(60, 3.0);
         let scene = Scene::new(shapes.clone());
         for i in 0..2000 {
             let a = i as f64 * 0.0317;
@@ -722,30 +730,13 @@ mod tests {
 
     #[test]
     fn tiled_depth_image_equals_per_ray_casts() {
-        let mut shapes = vec![Shape::Box {
+        let floor = Shape::Box {
             centre: [0.0, 0.0, -0.05],
             half: [9.0, 9.0, 0.05],
             yaw: 0.0,
-        }];
-        for i in 0..40 {
-            let f = i as f64;
-            shapes.push(Shape::Box {
-                centre: [
-                    (f * 1.7) % 9.0 - 4.5,
-                    (f * 2.3) % 7.0 - 3.5,
-                    (f * 0.9) % 2.0,
-                ],
-                half: [0.2 + (f % 3.0) * 0.1, 0.3, 0.25],
-                yaw: f * 0.3,
-            });
-            shapes.push(Shape::Cylinder {
-                x: (f * 3.1) % 9.0 - 4.5,
-                y: (f * 1.3) % 7.0 - 3.5,
-                radius: 0.15,
-                z_min: 0.0,
-                z_max: 2.0,
-            });
-        }
+        };
+        let mut shapes = clutter(40, 2.0);
+        shapes.push(floor);
         let scene = Scene::new(shapes);
         let cam = Pinhole {
             fx: 100.0,

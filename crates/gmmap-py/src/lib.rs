@@ -65,6 +65,17 @@ fn gmm_to_arrays<'py>(py: Python<'py>, g: &Gmm) -> PyResult<GmmArrays<'py>> {
     ))
 }
 
+type FitOutput<'py> = (GmmArrays<'py>, usize, bool, f64);
+
+fn fit_output<'py>(py: Python<'py>, fit: &gmmap_core::EmResult) -> PyResult<FitOutput<'py>> {
+    Ok((
+        gmm_to_arrays(py, &fit.gmm)?,
+        fit.n_iter,
+        fit.converged,
+        fit.log_likelihood,
+    ))
+}
+
 /// EM fit. Returns (weights, means, covariances, n_iter, converged, mean log-likelihood).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
@@ -80,7 +91,7 @@ fn fit_em<'py>(
     init: &str,
     reg_covar: f64,
     truncation: f64,
-) -> PyResult<(GmmArrays<'py>, usize, bool, f64)> {
+) -> PyResult<FitOutput<'py>> {
     let init = match init {
         "kmeans++" => InitMethod::KMeansPlusPlus,
         "random" => InitMethod::Random,
@@ -98,12 +109,7 @@ fn fit_em<'py>(
     };
     let pts = points_of(&points)?;
     let fit = in_pool(py, || gmmap_core::fit(&pts, &opts)).map_err(value_error)?;
-    Ok((
-        gmm_to_arrays(py, &fit.gmm)?,
-        fit.n_iter,
-        fit.converged,
-        fit.log_likelihood,
-    ))
+    fit_output(py, &fit)
 }
 
 /// EM continued from a given mixture: (weights, means, covariances, n_iter, converged, ll).
@@ -120,7 +126,7 @@ fn refine_em<'py>(
     tol: f64,
     reg_covar: f64,
     truncation: f64,
-) -> PyResult<(GmmArrays<'py>, usize, bool, f64)> {
+) -> PyResult<FitOutput<'py>> {
     let start = gmm_of(weights, means, covariances)?;
     let opts = EmOptions {
         n_components: start.len(),
@@ -133,12 +139,7 @@ fn refine_em<'py>(
     };
     let pts = points_of(&points)?;
     let fit = in_pool(py, || gmmap_core::refine(&pts, &start, &opts)).map_err(value_error)?;
-    Ok((
-        gmm_to_arrays(py, &fit.gmm)?,
-        fit.n_iter,
-        fit.converged,
-        fit.log_likelihood,
-    ))
+    fit_output(py, &fit)
 }
 
 /// log p(x) of every point under the mixture.

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from abc import abstractmethod
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import ClassVar, overload
 
 import numpy as np
@@ -57,6 +58,14 @@ class FrameSequence(Sequence[Frame]):
     def __repr__(self) -> str:
         where = getattr(self, "root", None) or getattr(self, "path", "")
         return f"{type(self).__name__}({str(where)!r}, frames={len(self)})"
+
+
+def read_point_file(path: Path) -> bytes:
+    """A point file's bytes; a missing one raises FileNotFoundError naming it."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: missing point file") from None
 
 
 def drifted(poses: np.ndarray, drift: Drift | None) -> np.ndarray:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gmmap.datasets.base import read_point_file
 from gmmap.errors import FileFormatError
 
 KINDS = {"F": "f", "I": "i", "U": "u"}
@@ -40,10 +41,7 @@ class PcdHeader:
 def read_pcd(path: str | Path) -> np.ndarray:
     """The points of a PCD file as (N, 3) float32 x y z; non-finite points are dropped."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing point file") from None
+    data = read_point_file(path)
     header = parse_header(data, path)
     for axis in "xyz":
         if axis not in header.fields:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gmmap.datasets.base import read_point_file
 from gmmap.errors import FileFormatError, InvalidInputError
 
 TYPES = {
@@ -54,10 +55,7 @@ class PlyHeader:
 def read_ply(path: str | Path) -> np.ndarray:
     """The vertices of a PLY file as (N, 3) float32 x y z; non-finite vertices are dropped."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing point file") from None
+    data = read_point_file(path)
     header = parse_header(data, path)
     names = [e.name for e in header.elements]
     if "vertex" not in names:
