@@ -426,8 +426,8 @@ fn symmetrise(h: &mut [[f64; 6]; 6]) {
 }
 
 impl Problem<'_> {
-    /// LM ascent on log F at one scale; returns the pose, F and the iterations used.
-    fn optimise(&self, mut pose: Pose, s2: f64, opts: &RegisterOptions) -> (Pose, f64, usize) {
+    /// LM ascent on log F at one scale; returns the pose, its evaluation and the iterations.
+    fn optimise(&self, mut pose: Pose, s2: f64, opts: &RegisterOptions) -> (Pose, Eval, usize) {
         let dims: &[usize] = if opts.four_dof {
             &[2, 3, 4, 5]
         } else {
@@ -451,14 +451,15 @@ impl Problem<'_> {
                     continue;
                 };
                 let next = pose.perturbed(&step);
-                // Only the value decides; derivatives are computed for accepted steps.
-                let f = self.evaluate(&next, s2, false).f;
+                // Most trials are accepted: evaluate them with derivatives in the same pass.
+                let trial = self.evaluate(&next, s2, true);
+                let f = trial.f;
                 if f > cur.f {
                     let size = step.iter().map(|v| v * v).sum::<f64>().sqrt();
                     // Done once steps or gains become negligible.
                     accepted = size > opts.tol && f - cur.f > 1e-6 * f;
                     pose = next;
-                    cur = self.evaluate(&next, s2, true);
+                    cur = trial;
                     lambda = (lambda / 3.0).max(1e-9);
                     break;
                 }
@@ -468,15 +469,7 @@ impl Problem<'_> {
                 break;
             }
         }
-        (pose, cur.f, iters)
-    }
-}
-
-/// The mixture with `s2` added to every variance.
-fn inflated(g: &Gmm, s2: f64) -> Gmm {
-    Gmm {
-        covariances: g.covariances.iter().map(|c| c.add_diag(s2)).collect(),
-        ..g.clone()
+        (pose, cur, iters)
     }
 }
 
@@ -543,7 +536,8 @@ pub fn register(
                 let mut pose = Pose::yaw(yaw);
                 let rm = mat_vec(&pose.r, &ms);
                 pose.t = [mt[0] - rm[0], mt[1] - rm[1], mt[2] - rm[2]];
-                let (p, f, it) = problem.optimise(pose, coarse, opts);
+                let (p, e, it) = problem.optimise(pose, coarse, opts);
+                let f = e.f;
                 iterations += it;
                 if f > best.0 {
                     best = (f, p);
@@ -553,15 +547,23 @@ pub fn register(
         }
     };
     let mut pose = start;
+    let mut last = None;
     for s in &opts.scales {
-        let (p, _, it) = problem.optimise(pose, s * s, opts);
+        let (p, e, it) = problem.optimise(pose, s * s, opts);
         pose = p;
         iterations += it;
+        last = (*s == 0.0).then_some(e);
     }
-    let fin = problem.evaluate(&pose, 0.0, true);
+    // The curvature at the solution, unwidened (already at hand when the ladder ends at 0).
+    let fin = last.unwrap_or_else(|| problem.evaluate(&pose, 0.0, true));
     let c2 = opts.confidence_scale * opts.confidence_scale;
-    let (fs, gs) = (inflated(source, c2), inflated(target, c2));
-    let norm = (fs.l2_inner(&fs)? * gs.l2_inner(&gs)?).sqrt();
+    // ∫f², ∫g² and ∫T(f)g, all widened by c2 and pruned alike (evaluate adds c2 to each side).
+    let self_overlap = |g: &Gmm| {
+        Problem::new(g, g, opts.cutoff)
+            .evaluate(&Pose::IDENTITY, c2, false)
+            .f
+    };
+    let norm = (self_overlap(source) * self_overlap(target)).sqrt();
     let overlap = problem.evaluate(&pose, c2, false).f;
     let mut h = fin.h;
     symmetrise(&mut h);
