@@ -457,7 +457,7 @@ impl Problem<'_> {
                 if f > cur.f {
                     let size = step.iter().map(|v| v * v).sum::<f64>().sqrt();
                     // Done once steps or gains become negligible.
-                    accepted = size > opts.tol && f - cur.f > 1e-6 * f;
+                    accepted = size > opts.tol && f - cur.f > 1e-5 * f;
                     pose = next;
                     cur = trial;
                     lambda = (lambda / 3.0).max(1e-9);
