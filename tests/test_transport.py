@@ -1,0 +1,309 @@
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from gmmap.store import Store
+from gmmap.transport import (
+    Transport,
+    TransportConfig,
+    TransportConfigError,
+    TransportError,
+    alive_key,
+    data_key,
+    free_port,
+    parse_data_key,
+)
+
+WAIT = 10.0  # generous: polling returns as soon as the condition holds
+
+
+def wait_until(condition: Callable[[], bool], timeout: float = WAIT) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return condition()
+
+
+def endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"
+
+
+class Inbox:
+    """Collects (robot, kind, seq, payload) from a subscription."""
+
+    def __init__(self) -> None:
+        self.items: queue.Queue = queue.Queue()
+
+    def __call__(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
+        self.items.put((robot, kind, seq, payload))
+
+    def get(self, timeout: float = WAIT):
+        return self.items.get(timeout=timeout)
+
+    def empty(self) -> bool:
+        return self.items.empty()
+
+
+@pytest.fixture
+def pair() -> Iterator[tuple[Transport, Transport]]:
+    """Robots a and b of fleet "lab" on loopback; b connects to a."""
+    port_a = free_port()
+    with (
+        Transport(TransportConfig("lab", "a", port=port_a)) as a,
+        Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b,
+    ):
+        assert a.wait_for_peers(["b"], WAIT) and b.wait_for_peers(["a"], WAIT)
+        yield a, b
+
+
+def test_key_expressions():
+    assert data_key("lab", "a", "submap", 7) == "gmmap/lab/a/submap/7"
+    assert alive_key("lab", "a") == "gmmap/lab/a"
+    assert parse_data_key("gmmap/lab/a/submap/7") == ("lab", "a", "submap", 7)
+    for bad in [
+        "gmmap/lab/a/submap",
+        "gmmap/lab/a/submap/x",
+        "gmmap/lab/a/submap/07",
+        "gmmap/lab/a/submap/-1",
+        "gmmap/lab/*/submap/1",
+        "other/lab/a/submap/1",
+        "gmmap/lab/a/submap/1/extra",
+    ]:
+        assert parse_data_key(bad) is None, bad
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"fleet": "", "robot": "a"},
+        {"fleet": "lab", "robot": ""},
+        {"fleet": "lab", "robot": "a/b"},
+        {"fleet": "lab", "robot": "a*"},
+        {"fleet": "l?b", "robot": "a"},
+        {"fleet": "lab", "robot": "@a"},
+        {"fleet": "lab", "robot": "a b"},
+        {"fleet": "lab", "robot": 3},
+        {"fleet": "lab", "robot": "a", "listen": ["tcp/127.0.0.1"]},
+        {"fleet": "lab", "robot": "a", "listen": ["127.0.0.1:7447"]},
+        {"fleet": "lab", "robot": "a", "listen": ["bogus/127.0.0.1:7447"]},
+        {"fleet": "lab", "robot": "a", "listen": ["tcp/127.0.0.1:99999"]},
+        {"fleet": "lab", "robot": "a", "listen": "tcp/127.0.0.1:7447"},
+        {"fleet": "lab", "robot": "a", "connect": ["tcp/127.0.0.1:0"]},
+        {"fleet": "lab", "robot": "a", "connect": ["tcp/[::1:7447"]},
+        {"fleet": "lab", "robot": "a", "connect": [""]},
+        {"fleet": "lab", "robot": "a", "port": 70000},
+        {"fleet": "lab", "robot": "a", "mode": "router"},
+        {"fleet": "lab", "robot": "a", "mode": "client"},
+        {"fleet": "lab", "robot": "a", "fetch_timeout": 0},
+    ],
+)
+def test_bad_config_raises_typed_error(kwargs):
+    with pytest.raises(TransportConfigError) as info:
+        TransportConfig(**kwargs)
+    assert isinstance(info.value, ValueError) and isinstance(info.value, TransportError)
+
+
+def test_good_config_normalises_endpoints():
+    cfg = TransportConfig(
+        "lab",
+        "robot-1.x_y",
+        listen=["tcp/0.0.0.0:7447", "tcp/[::1]:7448"],
+        connect=["tcp/peer.local:7447", "udp/10.0.0.2:7447#rel=1"],
+    )
+    assert cfg.listen == ("tcp/0.0.0.0:7447", "tcp/[::1]:7448")
+    assert isinstance(cfg.connect, tuple) and not cfg.multicast_scouting and cfg.mode == "peer"
+
+
+def test_bad_zenoh_option_raises_config_error():
+    with pytest.raises(TransportConfigError, match="Zenoh option"):
+        Transport(TransportConfig("lab", "a", zenoh_options={"no/such/option": 1}))
+
+
+def test_port_in_use_raises_transport_error():
+    port = free_port()
+    with (
+        Transport(TransportConfig("lab", "a", port=port)),
+        pytest.raises(TransportError, match="cannot open"),
+    ):
+        Transport(TransportConfig("lab", "b", port=port))
+
+
+def test_exchange_submaps_and_count_bytes(pair):
+    a, b = pair
+    inbox_a, inbox_b = Inbox(), Inbox()
+    a.subscribe(inbox_a)
+    b.subscribe(inbox_b)
+    # Puts have no history: publish once the subscriptions have reached the other side.
+    assert wait_until(lambda: a.has_listeners("submap") and b.has_listeners("descriptor"))
+
+    payloads = {0: b"\x01" * 1000, 1: bytes(range(256)) * 3, 2: b""}
+    for seq, payload in payloads.items():
+        a.publish("submap", seq, payload)
+    b.publish("descriptor", 0, bytearray(b"xyz"))
+
+    got = [inbox_b.get() for _ in payloads]
+    assert got == [("a", "submap", seq, p) for seq, p in payloads.items()]
+    assert inbox_a.get() == ("b", "descriptor", 0, b"xyz")
+    time.sleep(0.2)
+    assert inbox_a.empty() and inbox_b.empty()  # nobody hears its own messages
+
+    total = sum(len(p) for p in payloads.values())
+    keys = sum(len(data_key("lab", "a", "submap", s)) for s in payloads)
+    sent = a.stats()["sent"]["a"]["submap"]
+    assert (sent["messages"], sent["payload_bytes"], sent["key_bytes"]) == (3, total, keys)
+    assert b.stats()["received"]["a"]["submap"] == sent
+    assert b.stats()["sent"]["b"]["descriptor"]["payload_bytes"] == 3
+    assert a.stats()["received"]["b"]["descriptor"]["payload_bytes"] == 3
+    assert a.stats()["totals"]["sent"]["payload_bytes"] == total
+    assert a.stats()["totals"]["received"]["messages"] == 1
+    assert a.stats()["robot"] == "a" and a.stats()["fleet"] == "lab"
+
+
+def test_liveliness_join_and_leave():
+    port_a = free_port()
+    joined, left = queue.Queue(), queue.Queue()
+    with Transport(TransportConfig("lab", "a", port=port_a)) as a:
+        a.on_join(joined.put)
+        a.on_leave(left.put)
+        assert a.peers() == []
+        b = Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)]))
+        try:
+            assert joined.get(timeout=WAIT) == "b"
+            assert a.peers() == ["b"] and wait_until(lambda: b.peers() == ["a"])
+            # A callback registered late still hears of robots already present.
+            late = queue.Queue()
+            b.on_join(late.put)
+            assert late.get(timeout=WAIT) == "a"
+        finally:
+            b.close()
+        assert left.get(timeout=WAIT) == "b"
+        assert a.peers() == []
+        assert joined.empty()
+
+
+def test_other_fleet_and_malformed_keys_are_ignored(pair):
+    a, _ = pair
+    inbox = Inbox()
+    a.subscribe(inbox)
+    port_a = int(a.listen_endpoints[0].rsplit(":", 1)[1])
+    with Transport(TransportConfig("other", "c", listen=[], connect=[endpoint(port_a)])) as c:
+        assert c.listen_endpoints == ()
+        # Fleets do not see each other's presence either.
+        raw_cfg = zenoh.Config()
+        raw_cfg.insert_json5("connect/endpoints", f'["{endpoint(port_a)}"]')
+        raw_cfg.insert_json5("listen/endpoints", "[]")
+        raw_cfg.insert_json5("scouting/multicast/enabled", "false")
+        with zenoh.open(raw_cfg) as raw:
+            probe = raw.declare_publisher("gmmap/lab/x/submap/*")
+            assert wait_until(lambda: probe.matching_status.matching)
+            c.publish("submap", 0, b"other fleet")
+            for bad in ["submap/notanint", "submap/007", "sub map/1", "submap/1/extra"]:
+                raw.put(f"gmmap/lab/x/{bad}", b"junk")
+            raw.put("gmmap/lab/a/submap/5", b"pretends to be a")  # our own name: ignored
+            raw.put("gmmap/lab/x/submap/1", b"valid")  # sent last: when it arrives, all did
+            assert inbox.get() == ("x", "submap", 1, b"valid")
+    assert inbox.empty()
+    assert a.peers() == ["b"]
+    stats = a.stats()
+    # The bad seqs, the bad kind and our own name; ".../1/extra" matches no subscription.
+    assert stats["ignored"] == 4
+    assert set(stats["received"]) == {"x"}
+
+
+def test_callback_errors_do_not_stop_delivery(pair):
+    a, b = pair
+    inbox = Inbox()
+
+    def broken(*_args):
+        raise RuntimeError("bug in a stage")
+
+    b.subscribe(broken)
+    b.subscribe(inbox)
+    assert wait_until(a.has_listeners)
+    a.publish("submap", 0, b"one")
+    a.publish("submap", 1, b"two")
+    assert [inbox.get()[2], inbox.get()[2]] == [0, 1]
+
+
+def test_fetch_what_was_missed(tmp_path: Path):
+    """b starts after a published: it fetches a's submaps from a's store."""
+    port_a = free_port()
+    with (
+        Store(tmp_path / "a.db") as store,
+        Transport(TransportConfig("lab", "a", port=port_a)) as a,
+    ):
+        a.serve(store.fetch_provider)
+        payloads = [bytes([seq]) * (100 + seq) for seq in range(4)]
+        for seq, payload in enumerate(payloads):
+            store.put_submap("a", seq, payload, own=True)
+            a.publish("submap", seq, payload)
+        store.put_submap("z", 0, b"relayed")  # a also serves what it received from others
+
+        with Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b:
+            assert b.wait_for_peers(["a"], WAIT)
+            got = b.fetch("a", "submap", 0, timeout=WAIT)
+            assert got == list(enumerate(payloads))
+            assert b.fetch("a", "submap", 2, timeout=WAIT) == [(2, payloads[2]), (3, payloads[3])]
+            assert b.fetch("a", "submap", 10, timeout=WAIT) == []
+            assert b.fetch("z", timeout=WAIT) == [(0, b"relayed")]
+
+            received = b.stats()["received"]["a"]["submap"]
+            expected = sum(map(len, payloads)) + len(payloads[2]) + len(payloads[3])
+            assert received["fetch_messages"] == 6 == received["messages"]
+            assert received["fetch_payload_bytes"] == expected
+            assert b.stats()["queries"]["sent"] == 4
+            served = a.stats()["sent"]["a"]["submap"]
+            assert served["fetch_payload_bytes"] == expected
+            assert served["payload_bytes"] == expected + sum(map(len, payloads))
+            assert a.stats()["queries"]["served"] == 4
+
+
+def test_fetch_without_servers_returns_empty(pair):
+    _, b = pair
+    start = time.monotonic()
+    assert b.fetch("a", timeout=1.0) == []  # a never called serve()
+    assert time.monotonic() - start < 5.0
+
+
+def test_slow_provider_does_not_block_messages(pair):
+    a, b = pair
+    started, release = threading.Event(), threading.Event()
+
+    def slow(robot, kind, since):
+        started.set()
+        release.wait(WAIT)
+        return [(0, b"late")]
+
+    inbox = Inbox()
+    a.serve(slow)
+    a.subscribe(inbox)
+    assert wait_until(b.has_listeners)
+    result = queue.Queue()
+    threading.Thread(target=lambda: result.put(b.fetch("b", timeout=WAIT)), daemon=True).start()
+    assert started.wait(WAIT)
+    b.publish("submap", 0, b"message")
+    assert inbox.get() == ("b", "submap", 0, b"message")  # while the provider still waits
+    release.set()
+    assert result.get(timeout=WAIT) == [(0, b"late")]
+
+
+def test_bad_arguments_and_closed_transport():
+    with Transport(TransportConfig("lab", "a")) as a:
+        for args in [("sub/map", 0, b"x"), ("submap", -1, b"x"), ("submap", 0, "str")]:
+            with pytest.raises(TransportConfigError):
+                a.publish(*args)
+        with pytest.raises(TransportConfigError):
+            a.fetch("*")
+        with pytest.raises(TransportConfigError):
+            a.subscribe("not callable")
+    assert a.closed
+    a.close()  # idempotent
+    with pytest.raises(TransportError, match="closed"):
+        a.publish("submap", 0, b"x")
