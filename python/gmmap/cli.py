@@ -417,6 +417,69 @@ def eval_registration(
         )
 
 
+@evaluate.command("place")
+@click.option(
+    "--data",
+    type=click.Path(exists=True, path_type=Path),
+    help="A recording split into two robots (first and second half).",
+)
+@click.option("--sim", "world", help="A simulator world (default: office, unless --data).")
+@click.option("--robots", default=3, show_default=True, help="Simulated robots.")
+@click.option("--frames-per-submap", default=20, show_default=True)
+@click.option("--top-k", default=5, show_default=True, help="Candidates verified per query.")
+@click.option("--no-gicp", is_flag=True, help="Skip the points + GICP verification baseline.")
+@click.option("--seed", default=0, show_default=True)
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write recall@N and precision-recall PNGs here.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def eval_place(
+    data: Path | None,
+    world: str | None,
+    robots: int,
+    frames_per_submap: int,
+    top_k: int,
+    no_gicp: bool,
+    seed: int,
+    plots: Path | None,
+    as_json: bool,
+) -> None:
+    """Place recognition recall and verified precision (the paper's Fig. 7 and 8)."""
+    from gmmap import datasets
+    from gmmap.eval import place
+    from gmmap.place import PlaceOptions
+
+    if data is not None and world is not None:
+        raise click.UsageError("give --data or --sim, not both")
+    if data is not None:
+        place_set = place.split_place_set(datasets.open(data), frames_per_submap, _log)
+    else:
+        place_set = place.sim_place_set(world or "office", robots, seed, frames_per_submap, _log)
+    r = place.evaluate_place(place_set, PlaceOptions(top_k=top_k), progress=_log, gicp=not no_gicp)
+    if plots:
+        for png in place.plot(r, plots):
+            _log(f"wrote {png}")
+    if as_json:
+        click.echo(json.dumps(r))
+        return
+    click.echo(f"{r['queries']} queries, {r['submaps']} submaps of {r['robots']} robots")
+    for name in ("gmm", "points"):
+        n = r[name]["recall_at_n"]
+        click.echo(
+            f"{name:<7} recall@1 {n[0]:.1%}  @5 {n[4]:.1%}  @25 {n[24]:.1%}  "
+            f"@top-1% {r[name]['recall_at_1pct']:.1%}"
+        )
+    v = r["verified"]
+    line = f"verified recall at 100% precision: GMM {v['gmm_recall_at_full_precision']:.1%}"
+    if "points_gicp_recall_at_full_precision" in v:
+        line += f", points + GICP {v['points_gicp_recall_at_full_precision']:.1%}"
+    click.echo(line)
+    times = ", ".join(f"{k}: {t * 1e3:.2f} ms" for k, t in r["query_time_s"].items())
+    click.echo(f"describe {r['describe_time_s'] * 1e3:.1f} ms per submap; query {times}")
+
+
 @main.group()
 def bench() -> None:
     """Benchmarks against named baselines (ratios, measured in one run)."""

@@ -1,0 +1,128 @@
+"""Place recognition: descriptor invariances, database queries, verification."""
+
+import math
+
+import numpy as np
+import pytest
+
+from gmmap.em import fit_gmm
+from gmmap.errors import InvalidInputError
+from gmmap.eval.place import positives, pr_curve, recall_curve
+from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
+from gmmap.sim import World, simulate
+from gmmap.sim.world import cabinet, chair, pillar, shelf, table, wall
+from gmmap.submap import BuildOptions, build_submaps
+
+
+def yaw_matrix(yaw: float, t=(0.0, 0.0, 0.0)) -> np.ndarray:
+    T = np.eye(4)
+    T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+    T[:3, 3] = t
+    return T
+
+
+def two_rooms() -> World:
+    """A 6 m square room and a 9 m x 4 m hall, furnished differently, 8 m apart; robots 0 and
+    1 cross the room along nearby paths, robot 2 crosses the hall."""
+    shapes = wall(0, 0, 6, 0) + wall(0, 6, 6, 6) + wall(0, 0, 0, 6) + wall(6, 0, 6, 6)
+    shapes += wall(14, 1, 23, 1) + wall(14, 5, 23, 5) + wall(14, 1, 14, 5) + wall(23, 1, 23, 5)
+    shapes += table(4.5, 2.0) + chair(4.5, 2.8) + shelf(5.7, 4.5, yaw=math.pi / 2)
+    shapes += pillar(3.0, 4.5) + cabinet(1.0, 5.6)
+    shapes += table(18.0, 4.5, w=2.5, yaw=0.4) + pillar(16.5, 1.5, 0.35)
+    shapes += cabinet(19.6, 1.0, yaw=math.pi / 2) + cabinet(19.6, 2.0, yaw=math.pi / 2)
+    routes = [
+        [(1.0, 1.5), (2.5, 2.0)],
+        [(1.2, 2.3), (2.7, 2.6)],
+        [(15.0, 3.0), (16.5, 3.5)],
+    ]
+    return World("two-rooms", shapes, routes)
+
+
+@pytest.fixture(scope="module")
+def small_gmm(slice_points):
+    return fit_gmm(slice_points, 30, seed=0)
+
+
+@pytest.fixture(scope="module")
+def room_submaps():
+    run = simulate(two_rooms(), robots=3, seed=0, max_frames=15)
+    options = BuildOptions(frames_per_submap=15, voxel_size=0.08, n_components=60)
+    return [next(iter(build_submaps(r, r.name, options))) for r in run]
+
+
+def test_resample_is_seeded_and_sized(small_gmm):
+    a, b = resample(small_gmm, 500, seed=3), resample(small_gmm, 500, seed=3)
+    assert a.shape == (500, 3) and np.array_equal(a, b)
+
+
+def test_yawed_copy_same_key_and_yaw_within_one_sector(room_submaps):
+    descriptor = ShapeDescriptor()
+    gmm = room_submaps[0].gmm
+    points = resample(gmm)
+    sector = 2 * math.pi / descriptor.sectors
+    for yaw in (0.7, -2.0, 3.0):
+        turned = gmm.transform(yaw_matrix(yaw, (1.5, -0.4, 0.0)))
+        key_a = descriptor.describe_points(points)
+        key_b = descriptor.describe_points(resample(turned))
+        assert 1 - key_a @ key_b < 0.01
+        estimate = descriptor.yaw(points, resample(turned))
+        error = (estimate - yaw + math.pi) % (2 * math.pi) - math.pi
+        assert abs(error) <= sector
+
+
+def test_same_place_is_top1_and_distant_place_is_not(room_submaps):
+    a, b, far = room_submaps
+    db = PlaceDatabase()
+    for s in (a, far):
+        db.add(s.robot, s.seq, s.gmm)
+    candidates = db.query(b.robot, b.seq, b.gmm, k=2)
+    assert candidates[0].robot == a.robot
+    assert all(c.robot != far.robot for c in candidates)  # over d_thr, or absent
+
+
+def test_verification_accepts_true_and_rejects_wrong_candidate(room_submaps):
+    a, b, far = room_submaps
+    db = PlaceDatabase(options=PlaceOptions(max_distance=2.0))
+    for s in (a, far):
+        db.add(s.robot, s.seq, s.gmm)
+    matches = {m.candidate.robot: m for m in db.match(b.robot, b.seq, b.gmm)}
+    assert matches[a.robot].accepted
+    assert not matches[far.robot].accepted
+    truth = np.linalg.inv(a.gt_anchor) @ b.gt_anchor
+    T = matches[a.robot].registration.transform
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.1
+
+
+def test_own_recent_submaps_are_skipped(small_gmm):
+    db = PlaceDatabase(options=PlaceOptions(skip_recent=2, max_distance=2.0))
+    for seq in range(4):
+        db.add("a", seq, small_gmm)
+    keys = {(c.robot, c.seq) for c in db.query("a", 3, small_gmm, k=4)}
+    assert keys == {("a", 0)}
+
+
+def test_positives_need_overlap_and_other_robot(room_submaps):
+    pos = positives(room_submaps)
+    assert pos[0, 1] and pos[1, 0]
+    assert not pos[0, 2] and not pos[1, 2] and not pos.diagonal().any()
+
+
+def test_recall_and_pr_curves():
+    sim = np.array([[-np.inf, 0.9, 0.1], [0.9, -np.inf, 0.5], [0.1, 0.5, -np.inf]])
+    pos = np.array([[0, 0, 1], [0, 0, 1], [1, 1, 0]], dtype=bool)
+    curve = recall_curve(sim, pos, np.array([0, 1]))
+    assert curve[0] == 0.0 and curve[1] == 1.0
+    pr = pr_curve(np.array([0.9, 0.8, 0.3]), np.array([True, True, False]), 3)
+    assert pr["recall_at_full_precision"] == pytest.approx(2 / 3)
+    assert pr_curve(np.array([0.9]), np.array([False]), 1)["recall_at_full_precision"] == 0.0
+
+
+def test_bad_input_is_rejected(small_gmm):
+    with pytest.raises(InvalidInputError):
+        ShapeDescriptor().describe_points(np.zeros((1, 3)))
+    with pytest.raises(InvalidInputError):
+        ShapeDescriptor().describe_points(np.full((10, 3), np.nan))
+    with pytest.raises(InvalidInputError):
+        PlaceOptions(min_confidence=2.0)
+    with pytest.raises(InvalidInputError):
+        PlaceDatabase().add("a", 0, None)
