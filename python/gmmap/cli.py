@@ -239,6 +239,11 @@ def _lidar(beams: int, max_range: float, noise: bool) -> Lidar:
 )
 @click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
 @click.option("--max-frames", type=int, help="Use only the first frames of the data.")
+@click.option(
+    "--frames",
+    "frame_range",
+    help="Use only the frames START:STOP (a Python slice, e.g. :400 or 400:).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def build(
     path: Path,
@@ -255,6 +260,7 @@ def build(
     holdout: float,
     stride: int | None,
     max_frames: int | None,
+    frame_range: str | None,
     as_json: bool,
 ) -> None:
     """Build GMM submaps from a dataset (frames → point buffer → EM → model selection)."""
@@ -263,7 +269,9 @@ def build(
     from gmmap.submap import BuildOptions, build_submaps, write_submaps
 
     frames = datasets.open(path, **({"stride": stride} if stride else {}))
-    n = min(len(frames), max_frames or len(frames))
+    chosen = range(len(frames))[_slice(frame_range)] if frame_range else range(len(frames))
+    chosen = chosen[:max_frames] if max_frames else chosen
+    n = len(chosen)
     options = BuildOptions(
         frames_per_submap=frames_per_submap,
         voxel_size=voxel,
@@ -276,7 +284,7 @@ def build(
         holdout=holdout,
     )
     with click.progressbar(
-        (frames[i] for i in range(n)),
+        (frames[i] for i in chosen),
         length=n,
         file=sys.stderr,
         label=f"building submaps of {path}",
@@ -302,6 +310,89 @@ def build(
             f"{s['time_s'] * 1e3:>6.0f} ms"
         )
     click.echo(f"{len(submaps)} submaps → {out}")
+
+
+def _slice(text: str) -> slice:
+    try:
+        parts = [int(p) if p.strip() else None for p in text.split(":")]
+    except ValueError:
+        parts = []
+    if len(parts) != 2:
+        raise click.BadParameter(f"{text!r} is not START:STOP", param_hint="--frames")
+    return slice(*parts)
+
+
+@main.command()
+@click.argument(
+    "folders",
+    nargs=-1,
+    required=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
+@click.option("--top-k", default=5, show_default=True, help="Candidates verified per submap.")
+@click.option(
+    "--min-confidence", default=0.55, show_default=True, help="C_thr of the verification."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidence: float,
+          as_json: bool) -> None:  # fmt: skip
+    """Merge submap folders of several robots (from `gmmap build`): place recognition,
+    registration, the robust pose graph and a global map per connected group."""
+    import numpy as np
+
+    from gmmap.merge import MergeOptions
+    from gmmap.merge import merge as run_merge
+    from gmmap.place import PlaceOptions
+    from gmmap.submap import read_submaps
+
+    submaps: dict = {}
+    for folder in folders:
+        subs = read_submaps(folder)
+        if not subs:
+            raise click.BadParameter(f"{folder} holds no submaps", param_hint="FOLDERS")
+        if subs[0].robot in submaps:
+            raise click.BadParameter(
+                f"two folders of robot {subs[0].robot!r}: name them with gmmap build --robot",
+                param_hint="FOLDERS",
+            )
+        submaps[subs[0].robot] = subs
+    options = MergeOptions(PlaceOptions(top_k=top_k, min_confidence=min_confidence))
+    result = run_merge(submaps, options, _log)
+    report = result.report(submaps)
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+        for ref, gmap in result.maps.items():
+            gmap.save(out / f"globalmap_{ref}.npz")
+            gmap.save_ply(out / f"globalmap_{ref}.ply")
+            gmap.save_png(out / f"globalmap_{ref}.png")
+        (out / "merge.json").write_text(json.dumps(report, indent=1))
+        _log(f"wrote the global map(s) and merge.json to {out}")
+    if as_json:
+        click.echo(json.dumps(report))
+        return
+    click.echo(
+        f"{len(submaps)} robots, {report['candidates']} candidates, {report['verified']} "
+        f"verified; {report['accepted_edges']} edges accepted, "
+        f"{report['rejected_edges']} rejected {report['rejected_by']}"
+    )
+    click.echo(f"groups: {report['groups']} (reference {report['reference']})")
+    for r in report["robots"]:
+        t = np.array(r["to_reference"])
+        yaw = np.degrees(np.arctan2(t[1, 0], t[0, 0]))
+        click.echo(
+            f"{r['name']:>12} → {r['reference']:<12} t = {np.round(t[:3, 3], 3).tolist()} m, "
+            f"yaw {yaw:.2f}°, {r['submaps']} submaps"
+        )
+    for p in report.get("pairs", []):
+        click.echo(
+            f"error {p['b']} vs {p['a']}: {p['t_error'] * 100:.1f} cm, {p['r_error_deg']:.2f}°"
+        )
+    if "ate_before_m" in report:
+        click.echo(
+            f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
+            f"{report['ate_after_m']:.3f} m after optimisation"
+        )
 
 
 @main.group("eval")

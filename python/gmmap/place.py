@@ -187,13 +187,21 @@ class PlaceDatabase:
         self._vectors.append(self.describe(gmm) if vector is None else _unit(vector))
         self._matrix = None
 
-    def query(self, robot: str, seq: int, gmm: Gmm, k: int | None = None) -> list[Candidate]:
+    def query(
+        self, robot: str, seq: int, gmm: Gmm, k: int | None = None, others_only: bool = False
+    ) -> list[Candidate]:
         """The ``k`` nearest submaps under ``max_distance``, nearest first, excluding the query
-        itself and its robot's ``skip_recent`` submaps before it."""
-        return self.search(self.describe(gmm), robot, seq, k)
+        itself and its robot's ``skip_recent`` submaps before it (``others_only``: all of its
+        robot's submaps)."""
+        return self.search(self.describe(gmm), robot, seq, k, others_only)
 
     def search(
-        self, vector: np.ndarray, robot: str = "", seq: int = -1, k: int | None = None
+        self,
+        vector: np.ndarray,
+        robot: str = "",
+        seq: int = -1,
+        k: int | None = None,
+        others_only: bool = False,
     ) -> list[Candidate]:
         """`query` with the query's descriptor already computed."""
         if not self.keys:
@@ -201,7 +209,7 @@ class PlaceDatabase:
         if self._matrix is None:
             self._matrix = np.array(self._vectors)
         distance = 1.0 - self._matrix @ _unit(np.asarray(vector, dtype=float))
-        mask = np.array([self._excluded(key, robot, seq) for key in self.keys])
+        mask = np.array([self._excluded(key, robot, seq, others_only) for key in self.keys])
         distance[mask] = np.inf
         k = min(k or self.options.top_k, len(distance))
         best = np.argpartition(distance, k - 1)[:k]
@@ -209,8 +217,10 @@ class PlaceDatabase:
         limit = self.options.max_distance
         return [Candidate(*self.keys[i], float(distance[i])) for i in best if distance[i] <= limit]
 
-    def _excluded(self, key: tuple[str, int], robot: str, seq: int) -> bool:
-        return key[0] == robot and seq - self.options.skip_recent <= key[1] <= seq
+    def _excluded(self, key: tuple[str, int], robot: str, seq: int, others_only: bool) -> bool:
+        if key[0] != robot:
+            return False
+        return others_only or seq - self.options.skip_recent <= key[1] <= seq
 
     def verify(self, robot: str, seq: int, gmm: Gmm, candidate: Candidate) -> Match:
         """Registers the query onto the candidate with no initial guess (yaw hint from the

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 
@@ -253,9 +253,11 @@ def select_and_refine(gmm: Gmm, points: np.ndarray, options: BuildOptions) -> Gm
     return refined if refined.float32_bytes <= gmm.float32_bytes else merged
 
 
-def concatenate(gmms: list[Gmm]) -> Gmm:
-    """Mixtures joined with equal total weight each (the GMM-merge baseline's normalisation)."""
-    w = np.concatenate([g.weights / len(gmms) for g in gmms])
+def concatenate(gmms: Sequence[Gmm], shares: Sequence[float] | None = None) -> Gmm:
+    """Mixtures joined, each with total weight proportional to its share (default: equal, the
+    GMM-merge baseline's normalisation)."""
+    shares = np.ones(len(gmms)) if shares is None else np.asarray(shares, dtype=float)
+    w = np.concatenate([g.weights * share for g, share in zip(gmms, shares, strict=True)])
     return Gmm(
         w / w.sum(),
         np.concatenate([g.means for g in gmms]),

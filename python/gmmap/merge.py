@@ -1,0 +1,182 @@
+"""The offline multi-robot pipeline: submap folders in, relative frames and a global map out.
+
+What each robot's node does online, run once over whole folders (e.g. from ``gmmap build``):
+place recognition between the robots' submaps (descriptors computed here, from the GMMs
+only), verification by registration, the robust pose graph, the TF graph, and a global map
+per connected group. Where the submaps carry ground truth, the recovered frames and the
+optimised trajectories are compared with it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gmmap.backend import BackendOptions, BackendResult, PoseGraph
+from gmmap.datasets.geometry import invert
+from gmmap.errors import InvalidInputError
+from gmmap.globalmap import GlobalMap, build_global_map
+from gmmap.place import Match, PlaceDatabase, PlaceOptions
+from gmmap.select import SelectOptions
+from gmmap.submap import Submap
+from gmmap.tfgraph import TfGraph
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class MergeOptions:
+    place: PlaceOptions = field(default_factory=PlaceOptions)
+    backend: BackendOptions = field(default_factory=BackendOptions)
+    selection: SelectOptions = field(default_factory=SelectOptions)
+
+
+@dataclass
+class MergeResult:
+    matches: list[Match]  # every verified candidate, accepted by C_thr or not
+    backend: BackendResult
+    tf: TfGraph
+    maps: dict[str, GlobalMap]  # by reference robot
+    edge_ids: dict[int, Match]  # backend edge id → the match it came from
+    time_s: float
+
+    def report(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
+        """The JSON report: frames, groups, edges and, with ground truth, the errors."""
+        b = self.backend
+        reference = min(self.tf.groups()[0]) if self.tf.groups() else min(submaps)
+        report: dict = {
+            "reference": reference,
+            "robots": [
+                {
+                    "name": r,
+                    "reference": b.reference[r],
+                    "to_reference": b.to_reference[r].tolist(),
+                    "submaps": len(submaps[r]),
+                }
+                for r in sorted(submaps)
+            ],
+            "groups": b.groups,
+            "candidates": len(self.matches),
+            "verified": sum(m.accepted for m in self.matches),
+            "accepted_edges": len(b.accepted),
+            "rejected_edges": len(b.rejected),
+            "rejected_by": {
+                why: list(b.rejected.values()).count(why) for why in {*b.rejected.values()}
+            },
+            "backend_time_s": b.time_s,
+            "time_s": self.time_s,
+        }
+        if all(s.gt_anchor is not None for subs in submaps.values() for s in subs):
+            report.update(truth_errors(submaps, b))
+        return report
+
+
+def merge(
+    submaps: Mapping[str, Sequence[Submap]],
+    options: MergeOptions | None = None,
+    progress: Progress | None = None,
+) -> MergeResult:
+    """Runs the pipeline over ``submaps`` (robot name → its submaps)."""
+    options = options or MergeOptions()
+    say = progress or (lambda _m: None)
+    if len(submaps) < 1 or any(len(s) == 0 for s in submaps.values()):
+        raise InvalidInputError("merge needs at least one robot, each with submaps")
+    start = time.perf_counter()
+    say(f"describing {sum(map(len, submaps.values()))} submaps")
+    db = PlaceDatabase(options=options.place)
+    for subs in submaps.values():
+        for s in subs:
+            db.add(s.robot, s.seq, s.gmm)
+    matches = find_matches(db, submaps, say)
+    graph = PoseGraph(options.backend)
+    for subs in submaps.values():
+        for s in sorted(subs, key=lambda s: s.seq):
+            graph.add_submap(s.robot, s.seq, s.anchor)
+    edge_ids = {}
+    for m in matches:
+        if m.accepted:
+            target = (m.candidate.robot, m.candidate.seq)
+            r = m.registration
+            edge = graph.add_match(target, m.query, r.transform, r.information, r.confidence)
+            edge_ids[edge] = m
+    say(f"optimising the pose graph ({len(edge_ids)} inter-robot matches)")
+    result = graph.optimize()
+    tf = TfGraph.from_result(result)
+    everything = [s for subs in submaps.values() for s in subs]
+    maps = {}
+    for group in result.groups:
+        ref = result.reference[group[0]]
+        say(f"merging the global map of {', '.join(group)}")
+        poses = {k: v for k, v in result.poses.items() if k[0] in group}
+        maps[ref] = build_global_map(everything, poses, ref, options.selection)
+    return MergeResult(matches, result, tf, maps, edge_ids, time.perf_counter() - start)
+
+
+def find_matches(
+    db: PlaceDatabase, submaps: Mapping[str, Sequence[Submap]], say: Progress
+) -> list[Match]:
+    """Each submap queries the other robots' submaps; every candidate pair is verified once."""
+    seen: set[frozenset] = set()
+    matches = []
+    queries = [s for subs in submaps.values() for s in subs]
+    for i, s in enumerate(queries):
+        for c in db.query(s.robot, s.seq, s.gmm, others_only=True):
+            pair = frozenset({(s.robot, s.seq), (c.robot, c.seq)})
+            if pair in seen:
+                continue
+            seen.add(pair)
+            matches.append(db.verify(s.robot, s.seq, s.gmm, c))
+        if (i + 1) % 10 == 0 or i + 1 == len(queries):
+            accepted = sum(m.accepted for m in matches)
+            say(f"place recognition: {i + 1}/{len(queries)} submaps, {accepted} matches verified")
+    return matches
+
+
+def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
+    """A robot's true map frame → world, from its first submap (odometry starts exact)."""
+    first = min(subs, key=lambda s: s.seq)
+    return first.gt_anchor @ invert(first.anchor)
+
+
+def pose_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    t = float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3]))
+    c = (np.trace(estimate[:3, :3].T @ truth[:3, :3]) - 1) / 2
+    return t, math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> dict:
+    """Errors of every robot's recovered frame relative to its reference, and the ATE (evo)
+    of the anchors in the reference frame before (odometry placed by the recovered frames)
+    and after optimisation."""
+    frames = {r: map_to_world(subs) for r, subs in submaps.items()}
+    pairs, before, after, truth = [], [], [], []
+    for r, subs in sorted(submaps.items()):
+        ref = b.reference[r]
+        to_ref_true = invert(frames[ref]) @ frames[r]
+        if r != ref:
+            t, deg = pose_error(b.to_reference[r], to_ref_true)
+            pairs.append({"a": ref, "b": r, "t_error": t, "r_error_deg": deg})
+        for s in subs:
+            before.append(b.to_reference[r] @ s.anchor)
+            after.append(b.poses[(r, s.seq)])
+            truth.append(invert(frames[ref]) @ s.gt_anchor)
+    return {
+        "pairs": pairs,
+        "ate_before_m": ate(np.array(before), np.array(truth)),
+        "ate_after_m": ate(np.array(after), np.array(truth)),
+    }
+
+
+def ate(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """RMSE of anchor positions (evo's APE, translation part), without re-alignment: both are
+    already in the reference frame."""
+    from evo.core import metrics
+    from evo.core.trajectory import PosePath3D
+
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((PosePath3D(poses_se3=list(truth)), PosePath3D(poses_se3=list(estimate))))
+    return float(ape.get_statistic(metrics.StatisticsType.rmse))
