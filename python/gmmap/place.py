@@ -143,7 +143,7 @@ class PlaceOptions:
     not candidates (they overlap the query by construction)."""
 
     top_k: int = 5
-    max_distance: float = 0.01
+    max_distance: float = 0.1
     min_confidence: float = 0.55
     skip_recent: int = 2
     resample_points: int = RESAMPLE_POINTS

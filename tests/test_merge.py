@@ -1,0 +1,99 @@
+"""The global map and the offline merge pipeline."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import BUNDLED_TUM_SLICE
+from gmmap.cli import main
+from gmmap.datasets.tum import TumRgbd
+from gmmap.em import fit_gmm
+from gmmap.errors import InvalidInputError
+from gmmap.globalmap import build_global_map
+from gmmap.merge import merge
+from gmmap.submap import BuildOptions, Submap, build_submaps
+
+
+def submap_of(robot: str, gmm, anchor=None, n_points=1000) -> Submap:
+    anchor = np.eye(4) if anchor is None else anchor
+    return Submap(robot, 0, anchor, np.zeros(1), n_points, gmm)
+
+
+def test_two_identical_submaps_merge_to_one(slice_points):
+    gmm = fit_gmm(slice_points, 40, covariance="full", seed=0)
+    subs = [submap_of("a", gmm), submap_of("b", gmm)]
+    poses = {("a", 0): np.eye(4), ("b", 0): np.eye(4)}
+    merged = build_global_map(subs, poses, "a")
+    alone = build_global_map(subs[:1], poses, "a")  # the same selection on one copy
+    assert len(merged.gmm) <= 1.1 * len(alone.gmm) < 1.1 * len(gmm)
+    score = merged.gmm.score(slice_points)
+    assert score == pytest.approx(alone.gmm.score(slice_points), abs=0.05)
+
+
+def test_global_map_moves_submaps_and_answers_occupancy(slice_points):
+    gmm = fit_gmm(slice_points, 30, covariance="full", seed=0)
+    T = np.eye(4)
+    T[:3, 3] = [10.0, 0.0, 0.0]
+    gmap = build_global_map([submap_of("a", gmm)], {("a", 0): T}, "a")
+    surface = slice_points[:50] + T[:3, 3]
+    assert gmap.is_occupied(surface, sigmas=3.0).mean() > 0.9
+    assert gmap.is_free(surface + np.array([0.0, 0.0, 20.0])).all()
+    assert gmap.trajectories["a"].tolist() == [[10.0, 0.0, 0.0]]
+
+
+def test_global_map_needs_a_placed_submap(slice_points):
+    gmm = fit_gmm(slice_points, 5, seed=0)
+    with pytest.raises(InvalidInputError):
+        build_global_map([submap_of("a", gmm)], {}, "a")
+
+
+def test_global_map_exports(tmp_path, slice_points):
+    gmap = build_global_map(
+        [submap_of("a", fit_gmm(slice_points, 10, seed=0))], {("a", 0): np.eye(4)}, "a"
+    )
+    gmap.save(tmp_path / "map.npz")
+    gmap.save_ply(tmp_path / "map.ply", n=1000)
+    gmap.save_png(tmp_path / "map.png", n=5000)
+    assert all((tmp_path / f).stat().st_size > 0 for f in ("map.npz", "map.ply", "map.png"))
+
+
+@pytest.fixture(scope="module")
+def slice_robots():
+    """The bundled slice as two robots: frames 0-3 and 4-7 (the same desk, poses from the
+    same mocap frame, so the true relative frame is the identity)."""
+    frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)
+    options = BuildOptions(frames_per_submap=2, covariance="full", n_components=60)
+    return {
+        name: list(build_submaps(frames[part], name, options))
+        for name, part in (("a", slice(0, 4)), ("b", slice(4, 8)))
+    }
+
+
+def test_merge_recovers_the_relative_frame(slice_robots):
+    result = merge(slice_robots)
+    report = result.report(slice_robots)
+    assert report["groups"] == [["a", "b"]]
+    assert report["accepted_edges"] >= 1
+    (pair,) = report["pairs"]
+    assert pair["t_error"] < 0.05 and pair["r_error_deg"] < 2.0
+    assert set(result.maps) == {"a"}
+
+
+def test_merge_cli_json(tmp_path, slice_robots):
+    from gmmap.submap import write_submaps
+
+    for name, subs in slice_robots.items():
+        write_submaps(subs, tmp_path / name)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(
+        main, ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out), "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    report = json.loads(r.stdout)
+    assert report["reference"] == "a"
+    assert {x["name"] for x in report["robots"]} == {"a", "b"}
+    assert np.array(report["robots"][1]["to_reference"]).shape == (4, 4)
+    assert {"groups", "accepted_edges", "rejected_edges"} <= set(report)
+    assert (out / "globalmap_a.png").is_file() and (out / "merge.json").is_file()
