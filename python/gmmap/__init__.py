@@ -2,8 +2,15 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from gmmap.codec import decode, encode
 from gmmap.em import fit_gmm
-from gmmap.errors import FileFormatError, GmmapError, InvalidGmmError, InvalidInputError
+from gmmap.errors import (
+    DecodeError,
+    FileFormatError,
+    GmmapError,
+    InvalidGmmError,
+    InvalidInputError,
+)
 from gmmap.gmm import FitInfo, Gmm
 from gmmap.points import voxel_filter
 from gmmap.register import Registration, register
@@ -15,6 +22,7 @@ except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "DecodeError",
     "FileFormatError",
     "FitInfo",
     "Gmm",
@@ -24,6 +32,8 @@ __all__ = [
     "Registration",
     "SelectOptions",
     "__version__",
+    "decode",
+    "encode",
     "fit_gmm",
     "register",
     "select_components",

@@ -27,3 +27,7 @@ class TopicNotFoundError(InvalidInputError):
     def __init__(self, message: str, available: dict[str, str] | None = None) -> None:
         super().__init__(message)
         self.available = dict(available or {})
+
+
+class DecodeError(GmmapError, ValueError):
+    """Bytes that are not a valid gmmap wire message (truncated, corrupt, foreign, hostile)."""
