@@ -18,12 +18,10 @@ def test_help_and_version():
     assert "--scaling" in run("bench", "em", "--help").output
 
 
-def test_demo_reports_a_fit_of_real_frames():
-    r = json.loads(run("demo", "--components", "30", "--json").stdout)
-    assert r["frames"] == 8 and r["points"] > 10_000 and r["components"] == 30
-    assert r["gmm_float32_bytes"] == 30 * 28
-    assert r["points_float32_bytes"] == 12 * r["points"]
-    assert r["log_likelihood"] > -5
+def test_demo_help_lists_its_options():
+    """The demo itself (robot processes over Zenoh) runs in tests/test_robot.py."""
+    out = run("demo", "--help").output
+    assert "--robots" in out and "--json" in out and "--out" in out
 
 
 def test_bench_em_compares_with_sklearn():

@@ -27,30 +27,159 @@ def main() -> None:
 
 
 @main.command()
-@click.option("--components", default=100, show_default=True, help="GMM components.")
-@click.option("--voxel", default=0.02, show_default=True, help="Voxel size before fitting (m).")
+@click.option("--robots", default=3, show_default=True, help="Simulated robots (processes).")
+@click.option("--world", default="office", show_default=True, help="A built-in world.")
+@click.option("--seed", default=0, show_default=True, help="Sensor noise and odometry seed.")
+@click.option("--frames-per-submap", default=20, show_default=True)
+@click.option("--max-frames", type=int, help="Use only each robot's first frames.")
+@click.option("--sim-width", default=320, show_default=True, help="Depth image width (px).")
+@click.option("--linger", default=5.0, show_default=True, help="Seconds robots stay after.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output folder (stores, reports, map.png); default a new temporary folder.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def demo(
+    robots: int,
+    world: str,
+    seed: int,
+    frames_per_submap: int,
+    max_frames: int | None,
+    sim_width: int,
+    linger: float,
+    out: Path | None,
+    as_json: bool,
+) -> None:
+    """Simulated robots as separate processes share GMM submaps over Zenoh and merge maps."""
+    from gmmap.demo import format_report, run_demo
+
+    r = run_demo(robots, world, seed, frames_per_submap, max_frames, sim_width, linger, out, _log)
+    click.echo(json.dumps(r) if as_json else format_report(r))
+
+
+@main.command()
+@click.option("--id", "robot_id", required=True, help="This robot's name (unique in the fleet).")
+@click.option(
+    "--fleet", required=True, help="The fleet's name: robots of other fleets are ignored."
+)
+@click.option("--data", type=click.Path(exists=True, path_type=Path), help="A dataset to map.")
+@click.option("--sim", "sim_world", help="Render a simulated robot in this world instead.")
+@click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
+@click.option("--robots", default=3, show_default=True, help="--sim: robots in the simulation.")
+@click.option("--seed", default=0, show_default=True, help="--sim: noise and odometry seed.")
+@click.option("--sim-width", default=640, show_default=True, help="--sim: depth image width.")
+@click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
+@click.option("--frames", "frame_range", help="Use only the frames START:STOP.")
+@click.option("--max-frames", type=int, help="Use only the first frames (after --frames).")
+@click.option("--listen", multiple=True, help="Zenoh listen endpoint (default loopback).")
+@click.option("--port", default=0, show_default=True, help="Loopback listen port (0: free).")
+@click.option("--peer", multiple=True, help="Zenoh endpoint of another robot to connect to.")
+@click.option("--wait-for", multiple=True, help="Wait for these robots before mapping.")
+@click.option("--store", type=click.Path(dir_okay=False, path_type=Path), help="Store file.")
+@click.option("--frames-per-submap", default=20, show_default=True)
+@click.option("--components", default=100, show_default=True, help="Components fitted.")
 @click.option(
     "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
 )
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def demo(components: int, voxel: float, covariance: str, as_json: bool) -> None:
-    """Fit a GMM to real TUM fr1_xyz depth frames shipped with gmmap and report it."""
-    from gmmap.demo import run_demo
+@click.option("--linger", default=5.0, show_default=True, help="Seconds to stay after mapping.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--map-png",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the merged map of this robot's group as a PNG.",
+)
+@click.option("--json", "as_json", is_flag=True, help="One JSON status line per submap.")
+def robot(
+    robot_id: str,
+    fleet: str,
+    data: Path | None,
+    sim_world: str | None,
+    sim_index: int,
+    robots: int,
+    seed: int,
+    sim_width: int,
+    stride: int | None,
+    frame_range: str | None,
+    max_frames: int | None,
+    listen: tuple[str, ...],
+    port: int,
+    peer: tuple[str, ...],
+    wait_for: tuple[str, ...],
+    store: Path | None,
+    frames_per_submap: int,
+    components: int,
+    covariance: str,
+    linger: float,
+    report_path: Path | None,
+    map_png: Path | None,
+    as_json: bool,
+) -> None:
+    """Run one robot node: map, share submaps over Zenoh, match, optimise, report."""
+    from gmmap.robot import RobotConfig, run_robot
+    from gmmap.submap import BuildOptions
 
-    r = run_demo(components, voxel, covariance, log=_log)
-    if as_json:
-        click.echo(json.dumps(r))
-        return
-    click.echo(
-        f"frames          {r['frames']}\n"
-        f"points          {r['raw_points']:,} raw, {r['points']:,} voxelised ({voxel} m)\n"
-        f"components      {r['components']} ({covariance}), {r['iterations']} EM iterations, "
-        f"converged={r['converged']}\n"
-        f"log-likelihood  {r['log_likelihood']:.4f} per point\n"
-        f"float32 bytes   GMM {r['gmm_float32_bytes']:,} vs points {r['points_float32_bytes']:,} "
-        f"({r['compression']:.0f}x smaller)\n"
-        f"time            load {r['load_time_s'] * 1e3:.0f} ms, fit {r['fit_time_s'] * 1e3:.1f} ms"
+    if (data is None) == (sim_world is None):
+        raise click.UsageError("give exactly one of --data and --sim")
+    if data is not None:
+        from gmmap import datasets
+
+        frames = datasets.open(data, **({"stride": stride} if stride else {}))
+    else:
+        from gmmap import sim as s
+        from gmmap.datasets.drift import Drift
+
+        world = s.World.load(sim_world) if sim_world.endswith(".json") else s.get_world(sim_world)
+        camera = _depth_camera(sim_width, sim_width * 3 // 4, True)
+        run = s.simulate(world, robots, seed, camera, odometry=Drift(seed=seed))
+        if not 0 <= sim_index < len(run):
+            raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
+        frames = run[sim_index]
+    chosen = range(len(frames))[_slice(frame_range)] if frame_range else range(len(frames))
+    chosen = chosen[:max_frames] if max_frames else chosen
+    view = _Frames(frames, chosen)
+    config = RobotConfig(
+        robot=robot_id,
+        fleet=fleet,
+        store=store,
+        listen=tuple(listen) if listen else None,
+        port=port,
+        connect=tuple(peer),
+        build=BuildOptions(
+            frames_per_submap=frames_per_submap, n_components=components, covariance=covariance
+        ),
+        linger=linger,
+        wait_for=tuple(wait_for),
     )
+
+    def status(line: dict) -> None:
+        if as_json:
+            click.echo(json.dumps(line))
+        else:
+            _log(
+                f"{line['robot']}: submap {line['seq']} ({line['bytes']} B), "
+                f"{line['received']} received, {line['matches']} matches, groups {line['groups']}"
+            )
+
+    r = run_robot(config, view, report_path, map_png, status, _log)
+    _log(
+        f"{robot_id}: {r['submaps_built']} built, {r['submaps_received']} received, "
+        f"{r['matches_accepted']} matches accepted, {r['matches_rejected']} rejected, "
+        f"groups {r['groups']}"
+    )
+
+
+class _Frames:
+    """Frames ``indices`` of a lazy sequence, itself a lazy sequence."""
+
+    def __init__(self, frames, indices: range) -> None:
+        self.frames, self.indices = frames, indices
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, i: int):
+        return self.frames[self.indices[i]]
 
 
 @main.command()

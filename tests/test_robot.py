@@ -1,0 +1,165 @@
+"""The robot node: submap exchange between processes over loopback Zenoh, restart, fleets."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.merge import pose_error
+from gmmap.robot import RobotConfig, RobotNode
+from gmmap.store import Store
+from gmmap.submap import BuildOptions
+from gmmap.transport import free_port
+
+SLICE_BUILD = BuildOptions(frames_per_submap=2, covariance="full", n_components=60)
+
+
+def robot_cmd(name, fleet, port, peers, store, report, frames, *extra):
+    cmd = [
+        sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
+        "--id", name, "--fleet", fleet, "--data", str(BUNDLED_TUM_SLICE), "--stride", "2",
+        "--frames", frames, "--frames-per-submap", "2", "--covariance", "full",
+        "--components", "60", "--port", str(port), "--store", str(store),
+        "--report", str(report), "--linger", "1.5", "--json", *extra,
+    ]  # fmt: skip
+    for p in peers:
+        cmd += ["--peer", f"tcp/127.0.0.1:{p}"]
+    return cmd
+
+
+def test_two_robot_processes_share_submaps_and_agree_on_the_identity(tmp_path):
+    """The bundled slice split in two robots (frames 0-3 and 4-7: the same desk, one mocap
+    frame, so the true relative frame is the identity), each a process."""
+    pa, pb = free_port(), free_port()
+    fleet = f"t{os.getpid()}"
+    procs = [
+        subprocess.Popen(
+            robot_cmd(
+                n,
+                fleet,
+                port,
+                [other],
+                tmp_path / f"{n}.db",
+                tmp_path / f"{n}.json",
+                frames,
+                "--wait-for",
+                peer,
+            ),
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        for n, port, other, peer, frames in (("a", pa, pb, "b", "0:4"), ("b", pb, pa, "a", "4:8"))
+    ]
+    outs = [p.communicate(timeout=60)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0]
+    lines = [json.loads(x) for out in outs for x in out.splitlines()]
+    assert {(x["robot"], x["seq"]) for x in lines} == {("a", 0), ("a", 1), ("b", 0), ("b", 1)}
+    assert all(0 < x["bytes"] <= 1024 for x in lines)
+    for name, other in (("a", "b"), ("b", "a")):
+        with Store(tmp_path / f"{name}.db") as store:
+            assert store.seqs(other) == [0, 1] and store.seqs(name) == [0, 1]
+        r = json.loads((tmp_path / f"{name}.json").read_text())
+        assert r["submaps_built"] == 2 and r["held"] == {"a": 2, "b": 2}
+        assert r["groups"] == [["a", "b"]] and r["matches_accepted"] >= 1
+        t, deg = pose_error(np.array(r["to_reference"]["b"]), np.eye(4))
+        assert t < 0.05 and deg < 2.0
+        stats = r["bytes"]["by_robot_and_kind"]
+        sent = stats["sent"][name]["submap"]  # published, plus fetch replies served
+        published = sent["payload_bytes"] - sent["fetch_payload_bytes"]
+        assert published == sum(s["wire"] for s in r["submaps"])
+        assert stats["received"][other]["submap"]["messages"] >= 2
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return TumRgbd(BUNDLED_TUM_SLICE, stride=2)
+
+
+def node(tmp_path, name, port, peers=(), fleet="f", **kw):
+    config = RobotConfig(
+        robot=name, fleet=fleet, store=tmp_path / f"{name}.db", port=port,
+        connect=tuple(f"tcp/127.0.0.1:{p}" for p in peers), build=SLICE_BUILD, **kw,
+    )  # fmt: skip
+    return RobotNode(config)
+
+
+def wait(cond, timeout=15.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, frames):
+    pa, pb = free_port(), free_port()
+    b = node(tmp_path, "b", pb)
+    b.start()
+    try:
+        a = node(tmp_path, "a", pa, [pb])
+        a.start()
+        a.start_frames(frames[0:2]).join()  # a's submap 0, then a dies
+        assert wait(lambda: b.store.seqs("a") == [0])
+        a.stop()
+        assert a.store is not None
+        b.start_frames(frames[4:8]).join()  # b maps while a is away
+        assert wait(lambda: b.drain(5))
+        # a restarts on its store: resumes after frame 2 and seq 0, fetches b's submaps
+        a = node(tmp_path, "a", pa, [pb])
+        assert a.reloaded == 1 and a.frames_consumed == 2
+        a.start()
+        assert wait(lambda: a.store.seqs("b") == [0, 1])
+        a.start_frames(frames[0:4]).join()  # the same input: only frames 2-3 are new
+        assert wait(lambda: a.drain(5))
+        assert a.store.seqs("a") == [0, 1] and a.frames_consumed == 4
+        assert wait(lambda: b.store.seqs("a") == [0, 1])
+        assert wait(lambda: a.result is not None and a.result.groups == [["a", "b"]])
+        before = len(a.store.edges())
+        a.stop()
+        a = node(tmp_path, "a", pa, [pb])  # a second restart re-judges nothing
+        a.start()
+        assert a.drain(10) and len(a.store.edges()) == before
+        a.stop()
+    finally:
+        b.stop()
+
+
+def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
+    pa, pb = free_port(), free_port()
+    a = node(tmp_path, "a", pa, fleet="one")
+    b = node(tmp_path, "b", pb, [pa], fleet="two")
+    a.start()
+    b.start()
+    try:
+        b.start_frames(frames[0:2]).join()
+        time.sleep(1.0)
+        b._catch_up()
+        assert a.drain(5) and b.drain(5)
+        assert a.store.robots() == [] and a.counts["received"] == 0
+        assert b.store.robots() == ["b"] and b.transport.peers() == []
+    finally:
+        a.stop()
+        b.stop()
+
+
+def test_demo_runs_two_robot_processes(tmp_path):
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
+         "--max-frames", "40", "--frames-per-submap", "10", "--sim-width", "160",
+         "--linger", "1.5", "--out", str(tmp_path), "--json"],
+        capture_output=True, text=True, timeout=90,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    for key in ("robots", "groups", "bytes_per_submap", "reduction_vs_points", "pairs", "wall_s"):
+        assert key in r
+    assert r["robots"] == 2 and len(r["pairs"]) == 1
+    assert set(r["bytes_per_submap"]) >= {"wire", "points_float32", "gmm_float32_plus_descriptor"}
+    assert 0 < r["bytes_per_submap"]["wire"] <= 1024 and r["reduction_vs_points"] > 1
+    assert {"a", "b", "t_error", "r_error_deg"} <= set(r["pairs"][0])
