@@ -188,6 +188,9 @@ class PoseGraph:
     def n_submaps(self) -> int:
         return len(self._anchors)
 
+    def has_submap(self, node: Node) -> bool:
+        return (str(node[0]), int(node[1])) in self._anchors
+
     @property
     def matches(self) -> list[Match]:
         return list(self._matches)

@@ -188,6 +188,8 @@ class RobotNode:
     def linger(self, seconds: float) -> None:
         """Keep receiving, matching and optimising for ``seconds`` after the frames are done
         (a catch-up fetch at the start and half-way), then wait for the queues to drain."""
+        if self._stopping.is_set():
+            return
         deadline = time.monotonic() + seconds
         self._catch_up()
         half = time.monotonic() + seconds / 2
@@ -197,7 +199,8 @@ class RobotNode:
                 self._catch_up()
                 caught = True
             time.sleep(0.05)
-        self.drain(timeout=max(5.0, seconds))
+        if not self._stopping.is_set():
+            self.drain(timeout=max(5.0, seconds))
 
     def drain(self, timeout: float = 10.0) -> bool:
         """Wait until inbox, fetches and optimisation are idle (True) or ``timeout`` s pass."""
@@ -396,7 +399,7 @@ class RobotNode:
                 still = []
                 for e in pending:  # a match waits for both of its submaps
                     nodes = ((e.target_robot, e.target_seq), (e.source_robot, e.source_seq))
-                    if all(n in graph._anchors for n in nodes):
+                    if all(graph.has_submap(n) for n in nodes):
                         graph.add_match(
                             nodes[0], nodes[1], e.transform, e.information, e.confidence
                         )
@@ -546,17 +549,7 @@ def run_robot(
             builder.join(0.1)
             poll()
         poll()
-        deadline = time.monotonic() + config.linger
-        if not stopped.is_set():
-            node._catch_up()
-        half = False
-        while not stopped.is_set() and time.monotonic() < deadline:
-            if not half and deadline - time.monotonic() < config.linger / 2:
-                node._catch_up()
-                half = True
-            time.sleep(0.05)
-        if not stopped.is_set():
-            node.drain(timeout=max(5.0, config.linger))
+        node.linger(config.linger)
         report = node.report()
         report["interrupted"] = stopped.is_set()
         if map_path is not None and not stopped.is_set():
