@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.merge import pose_error
+from gmmap.eval.registration import pose_errors
 from gmmap.robot import RobotConfig, RobotNode
 from gmmap.store import Store
 from gmmap.submap import BuildOptions
@@ -66,7 +66,7 @@ def test_two_robot_processes_share_submaps_and_agree_on_the_identity(tmp_path):
         r = json.loads((tmp_path / f"{name}.json").read_text())
         assert r["submaps_built"] == 2 and r["held"] == {"a": 2, "b": 2}
         assert r["groups"] == [["a", "b"]] and r["matches_accepted"] >= 1
-        t, deg = pose_error(np.array(r["to_reference"]["b"]), np.eye(4))
+        t, deg = pose_errors(np.array(r["to_reference"]["b"]), np.eye(4))
         assert t < 0.05 and deg < 2.0
         stats = r["bytes"]["by_robot_and_kind"]
         sent = stats["sent"][name]["submap"]  # published, plus fetch replies served

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.datasets.geometry import invert
-from gmmap.merge import pose_error
+from gmmap.eval.registration import pose_errors
 from gmmap.transport import free_port
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
@@ -125,7 +125,7 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
         if name == ref:
             continue
         est = np.array(v["to_reference"][name])
-        t, deg = pose_error(est, invert(truth[ref]) @ truth[name])
+        t, deg = pose_errors(est, invert(truth[ref]) @ truth[name])
         pairs.append({"a": ref, "b": name, "t_error": t, "r_error_deg": deg})
     grouped = {r for g in groups for r in g if len(g) > 1}
     reference = min(reports)

@@ -9,7 +9,6 @@ optimised trajectories are compared with it.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -19,6 +18,7 @@ import numpy as np
 from gmmap.backend import BackendOptions, BackendResult, PoseGraph
 from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
+from gmmap.eval.registration import pose_errors
 from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.place import Match, PlaceDatabase, PlaceOptions
 from gmmap.select import SelectOptions
@@ -142,12 +142,6 @@ def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
     return first.gt_anchor @ invert(first.anchor)
 
 
-def pose_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
-    t = float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3]))
-    c = (np.trace(estimate[:3, :3].T @ truth[:3, :3]) - 1) / 2
-    return t, math.degrees(math.acos(min(1.0, max(-1.0, c))))
-
-
 def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> dict:
     """Errors of every robot's recovered frame relative to its reference, and the ATE (evo)
     of the anchors in the reference frame before (odometry placed by the recovered frames)
@@ -158,7 +152,7 @@ def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> d
         ref = b.reference[r]
         to_ref_true = invert(frames[ref]) @ frames[r]
         if r != ref:
-            t, deg = pose_error(b.to_reference[r], to_ref_true)
+            t, deg = pose_errors(b.to_reference[r], to_ref_true)
             pairs.append({"a": ref, "b": r, "t_error": t, "r_error_deg": deg})
         for s in subs:
             before.append(b.to_reference[r] @ s.anchor)
