@@ -166,7 +166,10 @@ class PlaceDatabase:
     keys: list[tuple[str, int]] = field(default_factory=list)
     gmms: dict[tuple[str, int], Gmm | None] = field(default_factory=dict)
     _vectors: list[np.ndarray] = field(default_factory=list)
+    _index: dict[tuple[str, int], int] = field(default_factory=dict)
     _matrix: np.ndarray | None = None
+    _robots: np.ndarray | None = None
+    _seqs: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.keys)
@@ -182,6 +185,7 @@ class PlaceDatabase:
             return
         if vector is None and gmm is None:
             raise InvalidInputError("add needs a GMM or a descriptor vector")
+        self._index[key] = len(self.keys)
         self.keys.append(key)
         self.gmms[key] = gmm
         self._vectors.append(self.describe(gmm) if vector is None else _unit(vector))
@@ -192,8 +196,11 @@ class PlaceDatabase:
     ) -> list[Candidate]:
         """The ``k`` nearest submaps under ``max_distance``, nearest first, excluding the query
         itself and its robot's ``skip_recent`` submaps before it (``others_only``: all of its
-        robot's submaps)."""
-        return self.search(self.describe(gmm), robot, seq, k, others_only)
+        robot's submaps). A submap already in the database is not described again."""
+        key = (robot, int(seq))
+        known = key in self.gmms and self.gmms[key] is gmm
+        vector = self._vectors[self._index[key]] if known else self.describe(gmm)
+        return self.search(vector, robot, seq, k, others_only)
 
     def search(
         self,
@@ -208,19 +215,18 @@ class PlaceDatabase:
             return []
         if self._matrix is None:
             self._matrix = np.array(self._vectors)
+            self._robots = np.array([r for r, _ in self.keys])
+            self._seqs = np.array([q for _, q in self.keys])
         distance = 1.0 - self._matrix @ _unit(np.asarray(vector, dtype=float))
-        mask = np.array([self._excluded(key, robot, seq, others_only) for key in self.keys])
-        distance[mask] = np.inf
+        own = self._robots == robot
+        if not others_only:
+            own &= (self._seqs >= seq - self.options.skip_recent) & (self._seqs <= seq)
+        distance[own] = np.inf
         k = min(k or self.options.top_k, len(distance))
         best = np.argpartition(distance, k - 1)[:k]
         best = best[np.argsort(distance[best], kind="stable")]
         limit = self.options.max_distance
         return [Candidate(*self.keys[i], float(distance[i])) for i in best if distance[i] <= limit]
-
-    def _excluded(self, key: tuple[str, int], robot: str, seq: int, others_only: bool) -> bool:
-        if key[0] != robot:
-            return False
-        return others_only or seq - self.options.skip_recent <= key[1] <= seq
 
     def verify(self, robot: str, seq: int, gmm: Gmm, candidate: Candidate) -> Match:
         """Registers the query onto the candidate with no initial guess (yaw hint from the
