@@ -700,6 +700,56 @@ def eval_place(
     click.echo(f"describe {r['describe_time_s'] * 1e3:.1f} ms per submap; query {times}")
 
 
+@evaluate.command("planner")
+@click.option(
+    "--scenes",
+    default="corner,passage,clutter,front-obstacle",
+    show_default=True,
+    help="Comma-separated planner scenes.",
+)
+@click.option("--robot-radius", default=0.2, show_default=True, help="Robot radius (m).")
+@click.option("--step", default=0.1, show_default=True, help="GMM planner step (m).")
+@click.option("--g-thr", default=1.5, show_default=True, help="Directional gradient threshold.")
+@click.option("--seed", default=0, show_default=True, help="Sensor noise seed.")
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write a PNG per scene (occupancy, gradient field, both paths) here.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def eval_planner(
+    scenes: str,
+    robot_radius: float,
+    step: float,
+    g_thr: float,
+    seed: int,
+    plots: Path | None,
+    as_json: bool,
+) -> None:
+    """The GMM gradient-field planner against A* on an occupancy grid (the paper's Table II)."""
+    from gmmap.eval.planner import SCENES, evaluate_planners
+    from gmmap.planner import PlannerOptions
+
+    names = [s.strip() for s in scenes.split(",") if s.strip()]
+    unknown = sorted(set(names) - set(SCENES))
+    if unknown or not names:
+        raise click.BadParameter(f"unknown scene(s) {unknown}; choose from {', '.join(SCENES)}")
+    options = PlannerOptions(robot_radius=robot_radius, step=step, g_thr=g_thr)
+    r = evaluate_planners(names, options, seed, plots, _log)
+    if as_json:
+        click.echo(json.dumps(r))
+        return
+    click.echo(f"robot radius {r['robot_radius']} m; length (m), clearance (m), time per step")
+    click.echo(f"{'scene':<15}{'A*':>28}{'GMM':>28}")
+    for name, s in r["scenes"].items():
+        cells = [
+            f"{'ok' if m['success'] else 'FAIL'} {m['length']:6.2f} {m['min_clearance']:5.2f} "
+            f"{m['time_per_step_s'] * 1e3:7.2f} ms"
+            for m in (s["astar"], s["gmm"])
+        ]
+        click.echo(f"{name:<15}{cells[0]:>28}{cells[1]:>28}")
+
+
 @main.group()
 def bench() -> None:
     """Benchmarks against named baselines (ratios, measured in one run)."""
