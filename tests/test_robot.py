@@ -130,6 +130,25 @@ def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, 
         b.stop()
 
 
+def test_the_owner_answers_fetches_and_a_holder_answers_when_it_is_away(tmp_path, frames):
+    pa, pb = free_port(), free_port()
+    b = node(tmp_path, "b", pb)
+    b.start()
+    try:
+        a = node(tmp_path, "a", pa, [pb])
+        a.start()
+        a.start_frames(frames[0:2]).join()
+        assert wait(lambda: b.store.seqs("a") == [0])
+        assert wait(lambda: "a" in b.transport.peers())
+        assert b._serve("a", "submap", 0) == []  # a is present: only a answers for a
+        assert [seq for seq, _ in a._serve("a", "submap", 0)] == [0]
+        a.stop()
+        assert wait(lambda: "a" not in b.transport.peers())
+        assert [seq for seq, _ in b._serve("a", "submap", 0)] == [0]
+    finally:
+        b.stop()
+
+
 def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
     pa, pb = free_port(), free_port()
     a = node(tmp_path, "a", pa, fleet="one")

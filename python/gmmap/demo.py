@@ -155,10 +155,17 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
-        "bytes_sent": {
-            n: r["bytes"]["totals"].get("sent", {}).get("payload_bytes")
-            for n, r in sorted(reports.items())
-        },
+        "bytes_sent": _totals(reports, "sent"),
+        "bytes_received": _totals(reports, "received"),
+        "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
+    }
+
+
+def _totals(reports: dict[str, dict], direction: str) -> dict:
+    """Payload bytes each robot sent or received (all kinds, fetches included)."""
+    return {
+        n: r["bytes"]["totals"].get(direction, {}).get("payload_bytes")
+        for n, r in sorted(reports.items())
     }
 
 

@@ -33,6 +33,7 @@ import json
 import logging
 import queue
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -48,6 +49,11 @@ from gmmap.datasets.frame import Frame
 from gmmap.place import PlaceDatabase, PlaceOptions
 from gmmap.store import Edge, Store
 from gmmap.submap import BuildOptions, Submap, SubmapBuilder
+
+try:
+    import resource
+except ImportError:  # Windows: no getrusage
+    resource = None  # type: ignore[assignment]
 from gmmap.tfgraph import TfGraph
 from gmmap.transport import Transport, TransportConfig
 
@@ -155,7 +161,7 @@ class RobotNode:
 
     def start(self) -> None:
         t = self.transport
-        t.serve(self.store.fetch_provider)
+        t.serve(self._serve)
         t.subscribe(lambda robot, kind, seq, payload: self._receive(robot, kind, seq, payload))
         t.on_join(lambda robot: self.fetch_queue.put(robot))
         for name, target in (
@@ -281,22 +287,33 @@ class RobotNode:
                 self._busy += 1
             self.inbox.put(("received", robot, seq, payload))
 
+    def _serve(self, robot: str, kind: str, since: int) -> list[tuple[int, bytes]]:
+        """A fetch is answered by the submaps' owner while it is present, else by every robot
+        holding them: N robots answering every query would send each submap N - 1 times."""
+        if robot != self.robot and robot in self.transport.peers():
+            return []
+        return self.store.fetch_provider(robot, kind, since)
+
     def _fetcher(self) -> None:
         while not self._stopping.is_set():
-            peer = self.fetch_queue.get()
-            if peer is None:
+            peers = {self.fetch_queue.get()}
+            # One round covers every robot known: joins queued meanwhile need no round of their own.
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    peers.add(self.fetch_queue.get_nowait())
+            if None in peers:
                 return
             with contextlib.suppress(Exception):
-                self._fetch_for(peer)
+                self._fetch_for(peers)
 
     def _catch_up(self) -> None:
         for peer in self.transport.peers():
             self.fetch_queue.put(peer)
 
-    def _fetch_for(self, peer: str) -> None:
-        """Fetch what we miss of ``peer`` and of every other robot we know (any present robot
-        holding it answers)."""
-        robots = ({peer} | set(self.store.robots())) - {self.robot}
+    def _fetch_for(self, peers: set[str]) -> None:
+        """Fetch what we miss of ``peers`` and of every other robot we know (its owner answers,
+        or, when the owner is away, whoever holds it)."""
+        robots = (peers | set(self.store.robots())) - {self.robot}
         for r in sorted(robots):
             if self._stopping.is_set():
                 return
@@ -471,6 +488,7 @@ class RobotNode:
             "to_reference": to_ref,
             "submaps": [{"seq": k, **v} for k, v in sorted(self.wire.items())],
             "optimisations": self.counts["optimised"],
+            "resources": resources(),
         }
 
     def global_map(self):
@@ -566,3 +584,13 @@ def run_robot(
         for sig, handler in old.items():
             signal.signal(sig, handler)
     return report
+
+
+def resources() -> dict | None:
+    """This process's CPU time (user + system, all threads) and peak resident memory so far."""
+    if resource is None:
+        return None
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    # ru_maxrss is in kilobytes on Linux and in bytes on macOS.
+    scale = 1 / 1024**2 if sys.platform == "darwin" else 1 / 1024
+    return {"cpu_s": usage.ru_utime + usage.ru_stime, "max_rss_mb": usage.ru_maxrss * scale}
