@@ -170,9 +170,8 @@ def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
 def test_demo_runs_two_robot_processes(tmp_path):
     out = subprocess.run(
         [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
-         "--max-frames", "40", "--frames-per-submap", "10", "--sim-width", "160",
          "--linger", "1.5", "--out", str(tmp_path), "--json"],
-        capture_output=True, text=True, timeout=90,
+        capture_output=True, text=True, timeout=180,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
@@ -182,3 +181,9 @@ def test_demo_runs_two_robot_processes(tmp_path):
     assert set(r["bytes_per_submap"]) >= {"wire", "points_float32", "gmm_float32_plus_descriptor"}
     assert 0 < r["bytes_per_submap"]["wire"] <= 1024 and r["reduction_vs_points"] > 1
     assert {"a", "b", "t_error", "r_error_deg"} <= set(r["pairs"][0])
+    # The robots meet in room B: one group, and the registrations the backend kept are right.
+    # (The map frames' error also holds the odometry drift between start and meeting place.)
+    assert r["groups"] == [["robot_0", "robot_1"]]
+    m = r["match_errors"]
+    assert m["n"] >= 3 and m["t_median"] < 0.05 and m["r_median_deg"] < 1.0
+    assert r["pairs"][0]["t_error"] < 1.0 and r["pairs"][0]["r_error_deg"] < 5.0

@@ -32,6 +32,13 @@ def main() -> None:
 @click.option("--seed", default=0, show_default=True, help="Sensor noise and odometry seed.")
 @click.option("--frames-per-submap", default=20, show_default=True)
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
+@click.option(
+    "--sensor",
+    type=click.Choice(["lidar", "depth"]),
+    default="lidar",
+    show_default=True,
+    help="Simulated sensor: a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
+)
 @click.option("--sim-width", default=320, show_default=True, help="Depth image width (px).")
 @click.option("--linger", default=5.0, show_default=True, help="Seconds robots stay after.")
 @click.option(
@@ -46,6 +53,7 @@ def demo(
     seed: int,
     frames_per_submap: int,
     max_frames: int | None,
+    sensor: str,
     sim_width: int,
     linger: float,
     out: Path | None,
@@ -54,7 +62,9 @@ def demo(
     """Simulated robots as separate processes share GMM submaps over Zenoh and merge maps."""
     from gmmap.demo import format_report, run_demo
 
-    r = run_demo(robots, world, seed, frames_per_submap, max_frames, sim_width, linger, out, _log)
+    r = run_demo(
+        robots, world, seed, frames_per_submap, max_frames, sensor, sim_width, linger, out, _log
+    )
     click.echo(json.dumps(r) if as_json else format_report(r))
 
 
@@ -68,6 +78,13 @@ def demo(
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
 @click.option("--robots", default=3, show_default=True, help="--sim: robots in the simulation.")
 @click.option("--seed", default=0, show_default=True, help="--sim: noise and odometry seed.")
+@click.option(
+    "--sensor",
+    type=click.Choice(["lidar", "depth"]),
+    default="lidar",
+    show_default=True,
+    help="--sim: the sensor, a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
+)
 @click.option("--sim-width", default=640, show_default=True, help="--sim: depth image width.")
 @click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
 @click.option("--frames", "frame_range", help="Use only the frames START:STOP.")
@@ -98,6 +115,7 @@ def robot(
     sim_index: int,
     robots: int,
     seed: int,
+    sensor: str,
     sim_width: int,
     stride: int | None,
     frame_range: str | None,
@@ -130,8 +148,8 @@ def robot(
         from gmmap.datasets.drift import Drift
 
         world = s.World.load(sim_world) if sim_world.endswith(".json") else s.get_world(sim_world)
-        camera = _depth_camera(sim_width, sim_width * 3 // 4, True)
-        run = s.simulate(world, robots, seed, camera, odometry=Drift(seed=seed))
+        device = _sim_sensor(sensor, sim_width)
+        run = s.simulate(world, robots, seed, device, odometry=Drift(seed=seed))
         if not 0 <= sim_index < len(run):
             raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
         frames = run[sim_index]
@@ -315,6 +333,13 @@ def _depth_camera(width: int, height: int, noise: bool) -> DepthCamera:
         cy=(height - 1) / 2,
         noise=noise,
     )
+
+
+def _sim_sensor(kind: str, width: int) -> DepthCamera | Lidar:
+    """The robots' simulated sensor: the default LiDAR, or the depth camera at ``width`` px."""
+    from gmmap.sim import Lidar
+
+    return Lidar() if kind == "lidar" else _depth_camera(width, width * 3 // 4, True)
 
 
 def _lidar(beams: int, max_range: float, noise: bool) -> Lidar:

@@ -35,6 +35,7 @@ def run_demo(
     seed: int = 0,
     frames_per_submap: int = 20,
     max_frames: int | None = None,
+    sensor: str = "lidar",
     sim_width: int = 320,
     linger: float = 5.0,
     out: Path | None = None,
@@ -45,6 +46,9 @@ def run_demo(
         out = Path(tempfile.mkdtemp(prefix="gmmap-demo-"))
     out.mkdir(parents=True, exist_ok=True)
     names = [f"robot_{i}" for i in range(robots)]
+    for name in names:  # a demo starts afresh: robots would resume from an earlier run's stores
+        for stale in out.glob(f"{name}.sqlite*"):
+            stale.unlink()
     ports = [free_port() for _ in names]
     fleet = f"demo{os.getpid()}"
     procs = []
@@ -53,7 +57,8 @@ def run_demo(
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--id", name, "--fleet", fleet, "--sim", world, "--sim-index", str(i),
-            "--robots", str(robots), "--seed", str(seed), "--sim-width", str(sim_width),
+            "--robots", str(robots), "--seed", str(seed), "--sensor", sensor,
+            "--sim-width", str(sim_width),
             "--port", str(ports[i]), "--store", str(out / f"{name}.sqlite"),
             "--frames-per-submap", str(frames_per_submap), "--linger", str(linger),
             "--report", str(out / f"{name}.json"), "--json",
@@ -151,13 +156,53 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
         "reduction_vs_gmm_float32_plus_descriptor": gmm / wire,
         "pairs": pairs,
         "matches": {
-            n: {"accepted": r["matches_accepted"], "rejected": r["matches_rejected"]}
+            n: {
+                "accepted": r["matches_accepted"],
+                "rejected": r["matches_rejected"],
+                "backend_accepted": r["backend_accepted"],
+                "backend_rejected": r["backend_rejected"],
+            }
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
+        "match_errors": match_errors(reports),
+    }
+
+
+def match_errors(reports: dict[str, dict]) -> dict:
+    """The inter-robot registrations the backend kept (every robot's, each pair once) against
+    the ground truth of the two anchors: the relative poses the robots estimated from GMMs
+    alone, free of the odometry drift that the map frames' errors also carry."""
+    truth = {
+        (name, int(seq)): np.array(T)
+        for name, r in reports.items()
+        for seq, T in r.get("ground_truth", {}).items()
+    }
+    errors, seen = [], set()
+    for r in reports.values():
+        for e in r.get("edges", []):
+            target, source = tuple(e["target"]), tuple(e["source"])
+            pair = frozenset({target, source})
+            known = target in truth and source in truth
+            if e.get("backend") != "accepted" or pair in seen or not known:
+                continue
+            seen.add(pair)
+            errors.append(
+                pose_errors(np.array(e["transform"]), invert(truth[target]) @ truth[source])
+            )
+    if not errors:
+        return {"n": 0}
+    t, r = np.array(errors).T
+    return {
+        "n": len(errors),
+        "t_median": float(np.median(t)),
+        "t_max": float(t.max()),
+        "r_median_deg": float(np.median(r)),
+        "r_max_deg": float(r.max()),
+        "within_5cm_1deg": float(np.mean((t <= 0.05) & (r <= 1.0))),
     }
 
 
@@ -188,8 +233,15 @@ def format_report(r: dict) -> str:
         lines.append(f"pair            {p['a']} ← {p['b']}: {err} (vs ground truth)")
     for n, m in r["matches"].items():
         lines.append(
-            f"matches         {n}: {m['accepted']} accepted, {m['rejected']} rejected, "
-            f"{r['received'][n]} submaps received"
+            f"matches         {n}: {m['accepted']} of {m['accepted'] + m['rejected']} over "
+            f"C_thr, {m['backend_accepted']} kept by PCM/GNC; {r['received'][n]} submaps received"
+        )
+    m = r.get("match_errors", {})
+    if m.get("n"):
+        lines.append(
+            f"match errors    {m['n']} registrations kept by the backend, vs truth: median "
+            f"{m['t_median']:.3f} m / {m['r_median_deg']:.2f}°, max {m['t_max']:.3f} m / "
+            f"{m['r_max_deg']:.2f}°; {m['within_5cm_1deg']:.0%} within 5 cm and 1°"
         )
     lines.append(f"map             {r.get('map_png')}")
     lines.append(f"output          {r['out']}")

@@ -113,6 +113,8 @@ class RobotNode:
         self._busy = 0  # items taken from the inbox and not finished
         self.result: BackendResult | None = None
         self.tf: TfGraph | None = None
+        self._graph_edges: dict[int, Edge] = {}  # backend edge id → the stored registration
+        self.gt_anchors: dict[int, np.ndarray] = {}  # own submaps' ground truth, evaluation only
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.wire: dict[int, dict] = {}  # own seq → bytes
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
@@ -273,6 +275,8 @@ class RobotNode:
         self.frames_consumed = consumed
         self.counts["built"] += 1
         self.wire[s.seq] = _sizes(s, len(payload), s.n_points)
+        if s.gt_anchor is not None:
+            self.gt_anchors[s.seq] = s.gt_anchor
         self.transport.publish(KIND, s.seq, payload)
         self.counts["sent"] += 1
         with self._lock:
@@ -417,9 +421,10 @@ class RobotNode:
                 for e in pending:  # a match waits for both of its submaps
                     nodes = ((e.target_robot, e.target_seq), (e.source_robot, e.source_seq))
                     if all(graph.has_submap(n) for n in nodes):
-                        graph.add_match(
+                        edge_id = graph.add_match(
                             nodes[0], nodes[1], e.transform, e.information, e.confidence
                         )
+                        self._graph_edges[edge_id] = e
                         changed = True
                     else:
                         still.append(e)
@@ -489,6 +494,18 @@ class RobotNode:
             "submaps": [{"seq": k, **v} for k, v in sorted(self.wire.items())],
             "optimisations": self.counts["optimised"],
             "resources": resources(),
+            # For evaluation only (the report stays on the robot): own anchors' ground truth
+            # where the frames carry it, and the accepted registrations.
+            "ground_truth": {str(seq): T.tolist() for seq, T in sorted(self.gt_anchors.items())},
+            "edges": [
+                {
+                    "target": [e.target_robot, e.target_seq],
+                    "source": [e.source_robot, e.source_seq],
+                    "transform": np.asarray(e.transform).tolist(),
+                    "backend": "accepted" if result and i in result.accepted else "rejected",
+                }
+                for i, e in sorted(self._graph_edges.items())
+            ],
         }
 
     def global_map(self):

@@ -41,15 +41,18 @@ def office() -> World:
 
     Rooms A, B, C lie south of the corridor (y 0-4), D and E north of it (y 6-10). Each robot
     route starts in a different room, crosses part of the corridor and enters another robot's
-    room, so every pair of the first three robots shares places.
+    room, so every pair of the first three robots shares places. Room widths (6, 7.5, 6.5 m)
+    and door positions are irregular on purpose: a strictly periodic office (equal rooms, doors
+    every 7 m) is ambiguous by construction, since a submap then fits as well one room over,
+    which no place recognition or registration can resolve.
     """
     s = _enclosure(0, 0, 20, 10)
-    s += wall(0, 4, 20, 4, doors=((3.5, 1.0), (10.5, 1.0), (17.0, 1.0)))
-    s += wall(0, 6, 20, 6, doors=((5.0, 1.0), (15.0, 1.0)))
-    s += wall(7, 0, 7, 4) + wall(14, 0, 14, 4) + wall(10, 6, 10, 10)
+    s += wall(0, 4, 20, 4, doors=((2.5, 1.0), (9.0, 1.0), (16.5, 1.0)))
+    s += wall(0, 6, 20, 6, doors=((4.2, 1.0), (15.5, 1.0)))
+    s += wall(6, 0, 6, 4) + wall(13.5, 0, 13.5, 4) + wall(11, 6, 11, 10)
     # Room A: a desk with chairs, a shelf on the west wall, a cabinet.
     s += table(2.0, 1.4) + chair(2.0, 2.1, -math.pi / 2) + chair(1.2, 1.4)
-    s += shelf(0.3, 2.6, yaw=math.pi / 2) + cabinet(6.2, 0.5)
+    s += shelf(0.3, 2.6, yaw=math.pi / 2) + cabinet(5.4, 0.5)
     # Room B: two tables, chairs, a shelf against the south wall.
     s += table(8.8, 1.5) + table(12.2, 1.5, yaw=0.3) + chair(8.8, 2.2, -math.pi / 2)
     s += chair(12.0, 2.3, -math.pi / 2) + shelf(10.5, 0.3, w=1.6)
@@ -63,15 +66,15 @@ def office() -> World:
     # Room E: two desks, a pillar, a cabinet row.
     s += table(13.0, 8.6, yaw=math.pi / 2) + table(18.0, 8.0) + pillar(16.0, 7.4)
     s += chair(18.0, 7.2, math.pi / 2) + cabinet(19.5, 9.0, yaw=math.pi / 2)
-    s += cabinet(11.0, 9.6)
-    # Corridor: two pillars against its north wall.
-    s += pillar(7.5, 5.75, 0.15) + pillar(12.5, 5.75, 0.15)
+    s += cabinet(11.8, 9.6)
+    # Corridor: a pillar against each of its walls.
+    s += pillar(7.9, 5.75, 0.15) + pillar(12.2, 4.25, 0.15)
     routes = [
-        [(2.5, 3.0), (3.5, 3.2), (3.5, 5.0), (10.5, 5.0), (10.5, 3.0), (11.5, 2.6)],  # A → B
-        [(10.0, 3.0), (10.5, 3.3), (10.5, 5.0), (15.0, 5.0), (15.0, 6.8), (17.0, 6.8)],  # B → E
-        [(17.0, 9.0), (15.0, 8.2), (15.0, 5.0), (5.0, 5.0), (5.0, 6.6), (3.0, 6.6)],  # E → D
-        [(16.8, 3.2), (17.0, 5.0), (10.5, 5.0), (10.5, 3.0), (9.0, 2.8)],  # C → B
-        [(2.5, 6.6), (5.0, 6.6), (5.0, 5.0), (17.0, 5.0), (17.0, 3.0)],  # D → C
+        [(1.5, 2.6), (2.5, 3.0), (2.5, 5.0), (9.0, 5.0), (9.0, 3.0), (11.5, 2.6)],  # A → B
+        [(10.0, 3.0), (9.0, 3.3), (9.0, 5.0), (15.5, 5.0), (15.5, 6.8), (17.0, 6.8)],  # B → E
+        [(17.0, 9.0), (15.5, 8.2), (15.5, 5.0), (4.2, 5.0), (4.2, 6.6), (3.0, 6.6)],  # E → D
+        [(16.0, 3.0), (16.5, 3.3), (16.5, 5.0), (9.0, 5.0), (9.0, 3.0), (10.2, 2.8)],  # C → B
+        [(2.5, 6.6), (4.2, 6.6), (4.2, 5.0), (16.5, 5.0), (16.5, 3.0)],  # D → C
     ]
     return World("office", s, routes)
 
