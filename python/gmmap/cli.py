@@ -488,9 +488,16 @@ def _slice(text: str) -> slice:
 @click.option(
     "--min-confidence", default=0.55, show_default=True, help="C_thr of the verification."
 )
+@click.option(
+    "--wrong-matches",
+    default=0.0,
+    show_default=True,
+    help="Robustness test: replace this fraction of verified matches by wrong ones.",
+)
+@click.option("--seed", default=0, show_default=True, help="Seeds --wrong-matches.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidence: float,
-          as_json: bool) -> None:  # fmt: skip
+          wrong_matches: float, seed: int, as_json: bool) -> None:  # fmt: skip
     """Merge submap folders of several robots (from `gmmap build`): place recognition,
     registration, the robust pose graph and a global map per connected group."""
     import numpy as np
@@ -511,7 +518,11 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
                 param_hint="FOLDERS",
             )
         submaps[subs[0].robot] = subs
-    options = MergeOptions(PlaceOptions(top_k=top_k, min_confidence=min_confidence))
+    options = MergeOptions(
+        PlaceOptions(top_k=top_k, min_confidence=min_confidence),
+        wrong_matches=wrong_matches,
+        seed=seed,
+    )
     result = run_merge(submaps, options, _log)
     report = result.report(submaps)
     if out:
@@ -547,6 +558,15 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
             f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
             f"{report['ate_after_m']:.3f} m after optimisation"
         )
+    m = report.get("match_errors", {})
+    if m.get("n"):
+        click.echo(
+            f"kept matches vs truth: median {m['t_median'] * 100:.1f} cm / "
+            f"{m['r_median_deg']:.2f}°, max {m['t_max'] * 100:.1f} cm / {m['r_max_deg']:.2f}°"
+        )
+    if "injected_wrong" in report:
+        w = report["injected_wrong"]
+        click.echo(f"injected wrong matches: {w['rejected']} of {w['n']} rejected")
 
 
 @main.group("eval")
@@ -670,6 +690,13 @@ def eval_registration(
 )
 @click.option("--sim", "world", help="A simulator world (default: office, unless --data).")
 @click.option("--robots", default=3, show_default=True, help="Simulated robots.")
+@click.option(
+    "--sensor",
+    type=click.Choice(["lidar", "depth"]),
+    default="lidar",
+    show_default=True,
+    help="--sim: the robots' sensor.",
+)
 @click.option("--frames-per-submap", default=20, show_default=True)
 @click.option("--top-k", default=5, show_default=True, help="Candidates verified per query.")
 @click.option("--no-gicp", is_flag=True, help="Skip the points + GICP verification baseline.")
@@ -684,6 +711,7 @@ def eval_place(
     data: Path | None,
     world: str | None,
     robots: int,
+    sensor: str,
     frames_per_submap: int,
     top_k: int,
     no_gicp: bool,
@@ -701,7 +729,9 @@ def eval_place(
     if data is not None:
         place_set = place.split_place_set(datasets.open(data), frames_per_submap, _log)
     else:
-        place_set = place.sim_place_set(world or "office", robots, seed, frames_per_submap, _log)
+        place_set = place.sim_place_set(
+            world or "office", robots, seed, frames_per_submap, _log, sensor
+        )
     r = place.evaluate_place(place_set, PlaceOptions(top_k=top_k), progress=_log, gicp=not no_gicp)
     if plots:
         for png in place.plot(r, plots):

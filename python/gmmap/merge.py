@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,9 +30,19 @@ Progress = Callable[[str], None]
 
 @dataclass
 class MergeOptions:
+    """``wrong_matches``: a robustness test: this fraction of the verified matches has its
+    transform replaced by a wrong one (a random yaw of 30-180° and 1-5 m, seeded by ``seed``),
+    with its confidence and information kept, before the backend sees them."""
+
     place: PlaceOptions = field(default_factory=PlaceOptions)
     backend: BackendOptions = field(default_factory=BackendOptions)
     selection: SelectOptions = field(default_factory=SelectOptions)
+    wrong_matches: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.wrong_matches <= 1.0:
+            raise InvalidInputError(f"wrong_matches must be in [0, 1], got {self.wrong_matches}")
 
 
 @dataclass
@@ -43,6 +53,7 @@ class MergeResult:
     maps: dict[str, GlobalMap]  # by reference robot
     edge_ids: dict[int, Match]  # backend edge id → the match it came from
     time_s: float
+    injected: list[int] = field(default_factory=list)  # edge ids of injected wrong matches
 
     def report(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
         """The JSON report: frames, groups, edges and, with ground truth, the errors."""
@@ -70,9 +81,37 @@ class MergeResult:
             "backend_time_s": b.time_s,
             "time_s": self.time_s,
         }
+        if self.injected:
+            report["injected_wrong"] = {
+                "n": len(self.injected),
+                "rejected": sum(i in b.rejected for i in self.injected),
+            }
         if all(s.gt_anchor is not None for subs in submaps.values() for s in subs):
             report.update(truth_errors(submaps, b))
+            report["match_errors"] = self.match_errors(submaps)
         return report
+
+    def match_errors(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
+        """The matches the backend kept against the anchors' ground truth (free of the drift
+        that the frames' errors carry)."""
+        by_key = {(s.robot, s.seq): s for subs in submaps.values() for s in subs}
+        errors = []
+        for edge in self.backend.accepted:
+            m = self.edge_ids[edge]
+            q, c = by_key[m.query], by_key[(m.candidate.robot, m.candidate.seq)]
+            truth = invert(c.gt_anchor) @ q.gt_anchor
+            errors.append(pose_errors(m.registration.transform, truth))
+        if not errors:
+            return {"n": 0}
+        t, r = np.array(errors).T
+        return {
+            "n": len(errors),
+            "t_median": float(np.median(t)),
+            "t_max": float(t.max()),
+            "r_median_deg": float(np.median(r)),
+            "r_max_deg": float(r.max()),
+            "within_5cm_1deg": float(np.mean((t <= 0.05) & (r <= 1.0))),
+        }
 
 
 def merge(
@@ -92,17 +131,20 @@ def merge(
         for s in subs:
             db.add(s.robot, s.seq, s.gmm)
     matches = find_matches(db, submaps, say)
+    wrong = inject_wrong(matches, options.wrong_matches, options.seed)
     graph = PoseGraph(options.backend)
     for subs in submaps.values():
         for s in sorted(subs, key=lambda s: s.seq):
             graph.add_submap(s.robot, s.seq, s.anchor)
-    edge_ids = {}
-    for m in matches:
+    edge_ids, injected = {}, []
+    for i, m in enumerate(matches):
         if m.accepted:
             target = (m.candidate.robot, m.candidate.seq)
             r = m.registration
             edge = graph.add_match(target, m.query, r.transform, r.information, r.confidence)
             edge_ids[edge] = m
+            if i in wrong:
+                injected.append(edge)
     say(f"optimising the pose graph ({len(edge_ids)} inter-robot matches)")
     result = graph.optimize()
     tf = TfGraph.from_result(result)
@@ -113,7 +155,28 @@ def merge(
         say(f"merging the global map of {', '.join(group)}")
         poses = {k: v for k, v in result.poses.items() if k[0] in group}
         maps[ref] = build_global_map(everything, poses, ref, options.selection)
-    return MergeResult(matches, result, tf, maps, edge_ids, time.perf_counter() - start)
+    elapsed = time.perf_counter() - start
+    return MergeResult(matches, result, tf, maps, edge_ids, elapsed, injected)
+
+
+def inject_wrong(matches: list[Match], fraction: float, seed: int) -> set[int]:
+    """Replaces the transform of ``fraction`` of the accepted matches (in place) by a wrong
+    one; returns their indices."""
+    accepted = [i for i, m in enumerate(matches) if m.accepted]
+    n = round(fraction * len(accepted))
+    if n == 0:
+        return set()
+    rng = np.random.default_rng(seed)
+    chosen = rng.choice(accepted, size=n, replace=False)
+    for i in chosen:
+        yaw = rng.uniform(np.pi / 6, np.pi) * rng.choice([-1, 1])
+        direction = rng.normal(size=2)
+        offset = np.eye(4)
+        offset[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+        offset[:2, 3] = rng.uniform(1, 5) * direction / np.linalg.norm(direction)
+        r = matches[i].registration
+        matches[i] = replace(matches[i], registration=replace(r, transform=offset @ r.transform))
+    return {int(i) for i in chosen}
 
 
 def find_matches(

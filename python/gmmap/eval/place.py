@@ -253,12 +253,19 @@ def sim_place_set(
     seed: int = 0,
     frames_per_submap: int = 20,
     progress: Progress | None = None,
+    sensor: str = "lidar",
 ) -> PlaceSet:
-    """Simulated robots with drifting odometry, their submaps and the positives."""
+    """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
+    "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
     from gmmap.datasets.drift import Drift
-    from gmmap.sim import get_world, simulate
+    from gmmap.sim import DepthCamera, Lidar, get_world, simulate
 
-    run = simulate(get_world(world), robots=robots, seed=seed, odometry=Drift(seed=seed))
+    if sensor not in ("lidar", "depth"):
+        raise ValueError(f"sensor must be 'lidar' or 'depth', got {sensor!r}")
+    device = Lidar() if sensor == "lidar" else DepthCamera()
+    run = simulate(
+        get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed)
+    )
     submaps = []
     for r in run:
         if progress:
