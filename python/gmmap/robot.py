@@ -113,6 +113,7 @@ class RobotNode:
         self._busy = 0  # items taken from the inbox and not finished
         self.result: BackendResult | None = None
         self.tf: TfGraph | None = None
+        self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
         self._graph_edges: dict[int, Edge] = {}  # backend edge id → the stored registration
         self.gt_anchors: dict[int, np.ndarray] = {}  # own submaps' ground truth, evaluation only
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
@@ -289,6 +290,7 @@ class RobotNode:
         if kind == KIND:
             with self._lock:
                 self._busy += 1
+                self._arrived.setdefault(robot, set()).add(seq)
             self.inbox.put(("received", robot, seq, payload))
 
     def _serve(self, robot: str, kind: str, since: int) -> list[tuple[int, bytes]]:
@@ -321,11 +323,17 @@ class RobotNode:
         for r in sorted(robots):
             if self._stopping.is_set():
                 return
-            latest = self.store.latest_seq(r)
-            gaps = self.store.missing(r, latest) if latest is not None else []
-            since = gaps[0] if gaps else (0 if latest is None else latest + 1)
+            # What arrived counts, stored or still queued: asking again for submaps waiting in
+            # the inbox of a busy robot would have them sent twice.
+            with self._lock:
+                have = set(self._arrived.get(r, ())) | set(self.store.seqs(r))
+            gaps = [seq for seq in range(max(have) + 1) if seq not in have] if have else []
+            since = gaps[0] if gaps else (max(have) + 1 if have else 0)
             for seq, payload in self.transport.fetch(r, KIND, since):
                 with self._lock:
+                    if seq in self._arrived.setdefault(r, set()):
+                        continue
+                    self._arrived[r].add(seq)
                     self._busy += 1
                 self.counts["fetched"] += 1
                 self.inbox.put(("fetched", r, seq, payload))
