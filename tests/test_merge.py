@@ -7,12 +7,13 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import BUNDLED_TUM_SLICE
+from gmmap.backend import BackendOptions
 from gmmap.cli import main
 from gmmap.datasets.tum import TumRgbd
 from gmmap.em import fit_gmm
 from gmmap.errors import InvalidInputError
 from gmmap.globalmap import build_global_map
-from gmmap.merge import merge
+from gmmap.merge import MergeOptions, merge
 from gmmap.submap import BuildOptions, Submap, build_submaps
 
 
@@ -97,3 +98,43 @@ def test_merge_cli_json(tmp_path, slice_robots):
     assert np.array(report["robots"][1]["to_reference"]).shape == (4, 4)
     assert {"groups", "accepted_edges", "rejected_edges"} <= set(report)
     assert (out / "globalmap_a.png").is_file() and (out / "merge.json").is_file()
+
+
+@pytest.fixture(scope="module")
+def sim_robots():
+    """Two simulated LiDAR robots in the office with drifting odometry; they meet in room B."""
+    from gmmap.datasets.drift import Drift
+    from gmmap.sim import Lidar, get_world, simulate
+
+    run = simulate(get_world("office"), 2, seed=0, sensor=Lidar(), odometry=Drift(seed=0))
+    options = BuildOptions(frames_per_submap=20, covariance="full")
+    return {r.name: list(build_submaps(r, r.name, options)) for r in run}
+
+
+def test_injected_wrong_matches_are_rejected_and_change_nothing(sim_robots):
+    clean = merge(sim_robots).report(sim_robots)
+    assert clean["groups"] == [["robot_0", "robot_1"]]
+    kept = clean["match_errors"]
+    assert kept["n"] >= 5 and kept["t_median"] < 0.05 and kept["r_median_deg"] < 1.0
+    report = merge(sim_robots, MergeOptions(wrong_matches=0.2, seed=1)).report(sim_robots)
+    wrong = report["injected_wrong"]
+    assert wrong["n"] >= 2 and wrong["rejected"] == wrong["n"]
+    assert report["groups"] == clean["groups"]
+    (before,), (after,) = clean["pairs"], report["pairs"]
+    assert abs(after["t_error"] - before["t_error"]) < 0.02
+    assert abs(after["r_error_deg"] - before["r_error_deg"]) < 0.5
+
+
+def test_fr1_xyz_halves_merge_to_three_centimetres(shared_data):
+    """The issue's real-data figure: fr1_xyz split at frame 398 into two robots (TUM's poses
+    are motion capture, hence the tight odometry noise)."""
+    frames = TumRgbd(shared_data / "tum_fr1_xyz")
+    options = BuildOptions(frames_per_submap=20, covariance="full")
+    halves = {
+        name: list(build_submaps(frames[part], name, options))
+        for name, part in (("first", slice(0, 398)), ("second", slice(398, None)))
+    }
+    merged = merge(halves, MergeOptions(backend=BackendOptions.for_drift(0.002)))
+    report = merged.report(halves)
+    (pair,) = report["pairs"]
+    assert pair["t_error"] <= 0.03 and pair["r_error_deg"] <= 1.0, pair

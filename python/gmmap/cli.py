@@ -99,6 +99,12 @@ def demo(
 @click.option(
     "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
 )
+@click.option(
+    "--odometry-drift",
+    default=0.02,
+    show_default=True,
+    help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
+)
 @click.option("--linger", default=5.0, show_default=True, help="Seconds to stay after mapping.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
@@ -128,12 +134,14 @@ def robot(
     frames_per_submap: int,
     components: int,
     covariance: str,
+    odometry_drift: float,
     linger: float,
     report_path: Path | None,
     map_png: Path | None,
     as_json: bool,
 ) -> None:
     """Run one robot node: map, share submaps over Zenoh, match, optimise, report."""
+    from gmmap.backend import BackendOptions
     from gmmap.robot import RobotConfig, run_robot
     from gmmap.submap import BuildOptions
 
@@ -168,6 +176,7 @@ def robot(
         ),
         linger=linger,
         wait_for=tuple(wait_for),
+        backend=BackendOptions.for_drift(odometry_drift),
     )
 
     def status(line: dict) -> None:
@@ -494,14 +503,22 @@ def _slice(text: str) -> slice:
     show_default=True,
     help="Robustness test: replace this fraction of verified matches by wrong ones.",
 )
+@click.option(
+    "--odometry-drift",
+    default=0.02,
+    show_default=True,
+    help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
+)
 @click.option("--seed", default=0, show_default=True, help="Seeds --wrong-matches.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidence: float,
-          wrong_matches: float, seed: int, as_json: bool) -> None:  # fmt: skip
+          wrong_matches: float, odometry_drift: float, seed: int,
+          as_json: bool) -> None:  # fmt: skip
     """Merge submap folders of several robots (from `gmmap build`): place recognition,
     registration, the robust pose graph and a global map per connected group."""
     import numpy as np
 
+    from gmmap.backend import BackendOptions
     from gmmap.merge import MergeOptions
     from gmmap.merge import merge as run_merge
     from gmmap.place import PlaceOptions
@@ -520,6 +537,7 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
         submaps[subs[0].robot] = subs
     options = MergeOptions(
         PlaceOptions(top_k=top_k, min_confidence=min_confidence),
+        BackendOptions.for_drift(odometry_drift),
         wrong_matches=wrong_matches,
         seed=seed,
     )
