@@ -40,6 +40,12 @@ def main() -> None:
     help="Simulated sensor: a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
 )
 @click.option("--sim-width", default=320, show_default=True, help="Depth image width (px).")
+@click.option(
+    "--drift",
+    default=0.02,
+    show_default=True,
+    help="Odometry drift per metre (and rad per rad turned) of the simulated robots.",
+)
 @click.option("--linger", default=5.0, show_default=True, help="Seconds robots stay after.")
 @click.option(
     "--out",
@@ -55,6 +61,7 @@ def demo(
     max_frames: int | None,
     sensor: str,
     sim_width: int,
+    drift: float,
     linger: float,
     out: Path | None,
     as_json: bool,
@@ -63,8 +70,9 @@ def demo(
     from gmmap.demo import format_report, run_demo
 
     r = run_demo(
-        robots, world, seed, frames_per_submap, max_frames, sensor, sim_width, linger, out, _log
-    )
+        robots, world, seed, frames_per_submap, max_frames, sensor, sim_width, drift, linger,
+        out, _log,
+    )  # fmt: skip
     click.echo(json.dumps(r) if as_json else format_report(r))
 
 
@@ -86,6 +94,9 @@ def demo(
     help="--sim: the sensor, a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
 )
 @click.option("--sim-width", default=640, show_default=True, help="--sim: depth image width.")
+@click.option(
+    "--sim-drift", default=0.02, show_default=True, help="--sim: odometry drift per metre."
+)
 @click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
 @click.option("--frames", "frame_range", help="Use only the frames START:STOP.")
 @click.option("--max-frames", type=int, help="Use only the first frames (after --frames).")
@@ -123,6 +134,7 @@ def robot(
     seed: int,
     sensor: str,
     sim_width: int,
+    sim_drift: float,
     stride: int | None,
     frame_range: str | None,
     max_frames: int | None,
@@ -157,7 +169,8 @@ def robot(
 
         world = s.World.load(sim_world) if sim_world.endswith(".json") else s.get_world(sim_world)
         device = _sim_sensor(sensor, sim_width)
-        run = s.simulate(world, robots, seed, device, odometry=Drift(seed=seed))
+        drift = Drift(sim_drift, 0.0, sim_drift, sim_drift / 4, 0.0, seed)
+        run = s.simulate(world, robots, seed, device, odometry=drift)
         if not 0 <= sim_index < len(run):
             raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
         frames = run[sim_index]

@@ -37,6 +37,7 @@ def run_demo(
     max_frames: int | None = None,
     sensor: str = "lidar",
     sim_width: int = 320,
+    drift: float = 0.02,
     linger: float = 5.0,
     out: Path | None = None,
     log=print,
@@ -58,7 +59,9 @@ def run_demo(
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--id", name, "--fleet", fleet, "--sim", world, "--sim-index", str(i),
             "--robots", str(robots), "--seed", str(seed), "--sensor", sensor,
-            "--sim-width", str(sim_width),
+            "--sim-width", str(sim_width), "--sim-drift", str(drift),
+            # the pose graph's odometry noise follows the simulated drift (with a floor)
+            "--odometry-drift", str(max(drift, 0.001)),
             "--port", str(ports[i]), "--store", str(out / f"{name}.sqlite"),
             "--frames-per-submap", str(frames_per_submap), "--linger", str(linger),
             "--report", str(out / f"{name}.json"), "--json",
