@@ -729,6 +729,9 @@ def eval_registration(
     help="--sim: the robots' sensor.",
 )
 @click.option("--frames-per-submap", default=20, show_default=True)
+@click.option(
+    "--covariance", type=click.Choice(["diag", "full"]), default="full", show_default=True
+)
 @click.option("--top-k", default=5, show_default=True, help="Candidates verified per query.")
 @click.option("--no-gicp", is_flag=True, help="Skip the points + GICP verification baseline.")
 @click.option("--seed", default=0, show_default=True)
@@ -744,6 +747,7 @@ def eval_place(
     robots: int,
     sensor: str,
     frames_per_submap: int,
+    covariance: str,
     top_k: int,
     no_gicp: bool,
     seed: int,
@@ -758,10 +762,11 @@ def eval_place(
     if data is not None and world is not None:
         raise click.UsageError("give --data or --sim, not both")
     if data is not None:
-        place_set = place.split_place_set(datasets.open(data), frames_per_submap, _log)
+        frames = datasets.open(data)
+        place_set = place.split_place_set(frames, frames_per_submap, _log, covariance)
     else:
         place_set = place.sim_place_set(
-            world or "office", robots, seed, frames_per_submap, _log, sensor
+            world or "office", robots, seed, frames_per_submap, _log, sensor, covariance
         )
     r = place.evaluate_place(place_set, PlaceOptions(top_k=top_k), progress=_log, gicp=not no_gicp)
     if plots:

@@ -254,6 +254,7 @@ def sim_place_set(
     frames_per_submap: int = 20,
     progress: Progress | None = None,
     sensor: str = "lidar",
+    covariance: str = "full",
 ) -> PlaceSet:
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
     "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
@@ -270,21 +271,27 @@ def sim_place_set(
     for r in run:
         if progress:
             progress(f"building {r.name}'s submaps ({len(r)} frames)")
-        options = BuildOptions(frames_per_submap=frames_per_submap, seed=seed)
+        options = BuildOptions(
+            frames_per_submap=frames_per_submap, seed=seed, covariance=covariance
+        )
         submaps += build_submaps(r, r.name, options)
     return PlaceSet(submaps, positives(submaps))
 
 
 def split_place_set(
-    frames: Sequence, frames_per_submap: int = 20, progress: Progress | None = None
+    frames: Sequence,
+    frames_per_submap: int = 20,
+    progress: Progress | None = None,
+    covariance: str = "full",
 ) -> PlaceSet:
     """One recording as two robots: its first and second half."""
     half = len(frames) // 2
+    options = BuildOptions(frames_per_submap=frames_per_submap, covariance=covariance)
     submaps = []
     for name, part in (("first", frames[:half]), ("second", frames[half:])):
         if progress:
             progress(f"building the {name} half's submaps ({len(part)} frames)")
-        submaps += build_submaps(part, name, BuildOptions(frames_per_submap=frames_per_submap))
+        submaps += build_submaps(part, name, options)
     return PlaceSet(submaps, positives(submaps))
 
 
