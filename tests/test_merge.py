@@ -12,7 +12,7 @@ from gmmap.cli import main
 from gmmap.datasets.tum import TumRgbd
 from gmmap.em import fit_gmm
 from gmmap.errors import InvalidInputError
-from gmmap.globalmap import build_global_map
+from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.merge import MergeOptions, merge
 from gmmap.submap import BuildOptions, Submap, build_submaps
 
@@ -138,3 +138,15 @@ def test_fr1_xyz_halves_merge_to_three_centimetres(shared_data):
     report = merged.report(halves)
     (pair,) = report["pairs"]
     assert pair["t_error"] <= 0.03 and pair["r_error_deg"] <= 1.0, pair
+
+
+def test_global_map_rerun_recording(tmp_path, slice_points):
+    from gmmap import viz
+
+    if not viz.available():
+        pytest.skip("rerun-sdk (the viz extra) is not installed")
+    g = fit_gmm(slice_points, 20, covariance="full", seed=0)
+    gmap = GlobalMap("a", g, {"a": np.zeros((3, 3)), "b": np.ones((2, 3))})
+    path = viz.save_rerun(gmap, tmp_path / "map.rrd", n_points=2_000)
+    data = path.read_bytes()
+    assert data[:4] == b"RRF2" and len(data) > 2_000 * 12

@@ -121,7 +121,8 @@ def demo(
 @click.option(
     "--map-png",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the merged map of this robot's group as a PNG.",
+    help="Write the merged map of this robot's group as a PNG (and, with the viz extra, "
+    "a Rerun recording beside it: .rrd).",
 )
 @click.option("--json", "as_json", is_flag=True, help="One JSON status line per submap.")
 def robot(
@@ -531,6 +532,7 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
     registration, the robust pose graph and a global map per connected group."""
     import numpy as np
 
+    from gmmap import viz
     from gmmap.backend import BackendOptions
     from gmmap.merge import MergeOptions
     from gmmap.merge import merge as run_merge
@@ -562,6 +564,8 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
             gmap.save(out / f"globalmap_{ref}.npz")
             gmap.save_ply(out / f"globalmap_{ref}.ply")
             gmap.save_png(out / f"globalmap_{ref}.png")
+            if viz.available():
+                viz.save_rerun(gmap, out / f"globalmap_{ref}.rrd")
         (out / "merge.json").write_text(json.dumps(report, indent=1))
         _log(f"wrote the global map(s) and merge.json to {out}")
     if as_json:

@@ -88,6 +88,7 @@ def run_demo(
     report = summarise(reports, world, robots, seed)
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
+    report["map_rrd"] = reports[names[0]].get("map_rrd")
     report["wall_s"] = time.perf_counter() - start
     (out / "demo.json").write_text(json.dumps(report, indent=1))
     return report
@@ -247,6 +248,8 @@ def format_report(r: dict) -> str:
             f"{m['r_max_deg']:.2f}°; {m['within_5cm_1deg']:.0%} within 5 cm and 1°"
         )
     lines.append(f"map             {r.get('map_png')}")
+    if r.get("map_rrd"):
+        lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")
     lines.append(f"output          {r['out']}")
     lines.append(f"wall time       {r['wall_s']:.1f} s")
     return "\n".join(lines)

@@ -601,6 +601,10 @@ def run_robot(
                 map_path.parent.mkdir(parents=True, exist_ok=True)
                 gmap.save_png(map_path)
                 report["map_png"] = str(map_path)
+                from gmmap import viz
+
+                if viz.available():  # the optional viz extra: a Rerun recording beside it
+                    report["map_rrd"] = str(viz.save_rerun(gmap, map_path.with_suffix(".rrd")))
         if report_path is not None:
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
