@@ -18,7 +18,7 @@ import numpy as np
 from gmmap.backend import BackendOptions, BackendResult, PoseGraph
 from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
-from gmmap.eval.registration import pose_errors
+from gmmap.eval.registration import error_summary, pose_errors
 from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.place import Match, PlaceDatabase, PlaceOptions
 from gmmap.select import SelectOptions
@@ -92,26 +92,18 @@ class MergeResult:
         return report
 
     def match_errors(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
-        """The matches the backend kept against the anchors' ground truth (free of the drift
-        that the frames' errors carry)."""
+        """Where robots met, against the anchors' ground truth (free of the drift the frames'
+        errors carry): each match the backend kept, as registered and as optimised."""
         by_key = {(s.robot, s.seq): s for subs in submaps.values() for s in subs}
-        errors = []
+        poses = self.backend.poses
+        registered, optimised = [], []
         for edge in self.backend.accepted:
             m = self.edge_ids[edge]
-            q, c = by_key[m.query], by_key[(m.candidate.robot, m.candidate.seq)]
-            truth = invert(c.gt_anchor) @ q.gt_anchor
-            errors.append(pose_errors(m.registration.transform, truth))
-        if not errors:
-            return {"n": 0}
-        t, r = np.array(errors).T
-        return {
-            "n": len(errors),
-            "t_median": float(np.median(t)),
-            "t_max": float(t.max()),
-            "r_median_deg": float(np.median(r)),
-            "r_max_deg": float(r.max()),
-            "within_5cm_1deg": float(np.mean((t <= 0.05) & (r <= 1.0))),
-        }
+            target = (m.candidate.robot, m.candidate.seq)
+            truth = invert(by_key[target].gt_anchor) @ by_key[m.query].gt_anchor
+            registered.append(pose_errors(m.registration.transform, truth))
+            optimised.append(pose_errors(invert(poses[target]) @ poses[m.query], truth))
+        return {**error_summary(registered), "optimised": error_summary(optimised)}
 
 
 def merge(

@@ -499,6 +499,11 @@ class RobotNode:
             "groups": result.groups if result else [[self.robot]],
             "reference": reference,
             "to_reference": to_ref,
+            "poses": (
+                {f"{r}/{seq}": P.tolist() for (r, seq), P in sorted(result.poses.items())}
+                if result
+                else {}
+            ),
             "submaps": [{"seq": k, **v} for k, v in sorted(self.wire.items())],
             "optimisations": self.counts["optimised"],
             "resources": resources(),

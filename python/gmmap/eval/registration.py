@@ -48,6 +48,21 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     return t, math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
+def error_summary(errors: Sequence[tuple[float, float]]) -> dict:
+    """Median, max and the share within 5 cm and 1° of (translation m, rotation °) errors."""
+    if not errors:
+        return {"n": 0}
+    t, r = np.array(errors, dtype=float).T
+    return {
+        "n": len(errors),
+        "t_median": float(np.median(t)),
+        "t_max": float(t.max()),
+        "r_median_deg": float(np.median(r)),
+        "r_max_deg": float(r.max()),
+        "within_5cm_1deg": float(np.mean((t <= 0.05) & (r <= 1.0))),
+    }
+
+
 def random_perturbation(rng: np.random.Generator) -> np.ndarray:
     """A yaw uniform in ±(0–180°) and a translation uniform in the 1 m ball."""
     yaw = rng.uniform(0, math.pi) * rng.choice([-1, 1])
