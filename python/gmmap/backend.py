@@ -297,6 +297,16 @@ class PoseGraph:
         reference = {r: g[0] for g in groups for r in g}
         graph, initial, n_known = self._build(candidates, reference)
         values, weights, solver = self._solve(graph, initial, n_known, candidates)
+        if solver == "gnc":
+            # The inlier set changed: last time's estimate may sit in a basin the new set
+            # does not support. Solve again from today's matches alone; keep the better.
+            cold = self._build(candidates, reference, fresh=True)
+            warm_outliers = self._gnc_outliers
+            c_values, c_weights, _ = self._solve(*cold, candidates)
+            if _better(cold[0], c_values, c_weights, graph, values, weights, n_known):
+                graph, values, weights = cold[0], c_values, c_weights
+            else:
+                self._gnc_outliers = warm_outliers
         accepted = []
         for m, w in zip(candidates, weights, strict=True):
             if w > 0.5:
@@ -403,14 +413,15 @@ class PoseGraph:
         return np.stack([sr, sr, sr, st, st, st], axis=1)
 
     def _build(
-        self, matches: list[Match], reference: dict[str, str]
+        self, matches: list[Match], reference: dict[str, str], fresh: bool = False
     ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, int]:
         """The factor graph (priors and odometry first, matches last, in ``matches`` order),
-        the initial values and the number of leading known-inlier factors."""
+        the initial values (``fresh``: from odometry and matches alone, not the last
+        estimate) and the number of leading known-inlier factors."""
         keys = self._key
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
-        frames, local = self._initial_frames(matches, reference)
+        frames, local = self._initial_frames(matches, reference, fresh)
         nodes = list(keys)
         # Projected onto SO(3): GTSAM keeps a slightly skewed rotation as given, and the
         # warm-start loop (solution → frames → initial values) would amplify it each update.
@@ -454,7 +465,7 @@ class PoseGraph:
         return [self._odometry_factors[(robot, a, b)] for a, b in pairs]
 
     def _initial_frames(
-        self, matches: list[Match], reference: dict[str, str]
+        self, matches: list[Match], reference: dict[str, str], fresh: bool = False
     ) -> tuple[dict[str, np.ndarray], dict[Node, np.ndarray]]:
         """Warm start: per robot a frame (its map frame into its group's reference) and per
         node a pose in the robot's own map frame, P = frame · local."""
@@ -463,6 +474,9 @@ class PoseGraph:
             known = [s for s in seqs if (robot, s) in self._local]
             for s in seqs:
                 node = (robot, s)
+                if fresh:
+                    local[node] = self._anchors[node]
+                    continue
                 if node in self._local:
                     local[node] = self._local[node]
                     continue
@@ -505,7 +519,7 @@ class PoseGraph:
             if (a, b) in previous:
                 direct = local[m.target] @ m.transform @ invert(local[m.source])
                 stale |= not _close(direct, previous[(a, b)])
-        if not stale:
+        if not (stale or fresh):
             for (a, b), T_ab in previous.items():
                 links[a].append((0, b, T_ab))
         frames: dict[str, np.ndarray] = {}
@@ -834,3 +848,22 @@ def _close(a: np.ndarray, b: np.ndarray, metres: float = 1.0, degrees: float = 1
     d = invert(a) @ b
     angle = float(np.ravel(rotation_angle(d[:3, :3]))[0])
     return bool(np.linalg.norm(d[:3, 3]) <= metres and math.degrees(angle) <= degrees)
+
+
+def _better(
+    graph_a: gtsam.NonlinearFactorGraph,
+    values_a: gtsam.Values,
+    weights_a: np.ndarray,
+    graph_b: gtsam.NonlinearFactorGraph,
+    values_b: gtsam.Values,
+    weights_b: np.ndarray,
+    n_known: int,
+) -> bool:
+    """Whether solution a beats b: more matches kept as inliers, then a lower cost of the
+    odometry, priors and kept matches."""
+
+    def score(graph, values, weights) -> tuple[int, float]:
+        kept = [k for k in range(n_known)] + [n_known + i for i, w in enumerate(weights) if w > 0.5]
+        return -len(kept), sum(graph.at(k).error(values) for k in kept)
+
+    return score(graph_a, values_a, weights_a) < score(graph_b, values_b, weights_b)
