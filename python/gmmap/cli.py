@@ -806,6 +806,7 @@ def eval_place(
 @click.option("--step", default=0.1, show_default=True, help="GMM planner step (m).")
 @click.option("--g-thr", default=1.5, show_default=True, help="Directional gradient threshold.")
 @click.option("--seed", default=0, show_default=True, help="Sensor noise seed.")
+@click.option("--components", default=200, show_default=True, help="Components per submap.")
 @click.option(
     "--plots",
     type=click.Path(file_okay=False, path_type=Path),
@@ -818,6 +819,7 @@ def eval_planner(
     step: float,
     g_thr: float,
     seed: int,
+    components: int,
     plots: Path | None,
     as_json: bool,
 ) -> None:
@@ -830,7 +832,7 @@ def eval_planner(
     if unknown or not names:
         raise click.BadParameter(f"unknown scene(s) {unknown}; choose from {', '.join(SCENES)}")
     options = PlannerOptions(robot_radius=robot_radius, step=step, g_thr=g_thr)
-    r = evaluate_planners(names, options, seed, plots, _log)
+    r = evaluate_planners(names, options, seed, plots, _log, components)
     if as_json:
         click.echo(json.dumps(r))
         return

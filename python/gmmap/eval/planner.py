@@ -43,13 +43,22 @@ class SceneMap:
     submaps: int
 
 
-def map_scene(world, frames_per_submap: int = 20, seed: int = 0) -> SceneMap:
-    """Drives the scene's route with the default LiDAR and builds the GMM map."""
+def map_scene(
+    world, frames_per_submap: int = 20, seed: int = 0, n_components: int = 200
+) -> SceneMap:
+    """Drives the scene's route with the default LiDAR and builds the GMM map: full
+    covariances and 200 components per submap (a LiDAR submap spans a whole room; with 100,
+    one Gaussian per box covers the gap beside it, and wall ends come out short)."""
     from gmmap.sim import Lidar, simulate
 
     (robot,) = simulate(world, robots=1, seed=seed, sensor=Lidar())
     frames = list(robot)
-    options = BuildOptions(frames_per_submap=frames_per_submap, seed=seed)
+    options = BuildOptions(
+        frames_per_submap=frames_per_submap,
+        n_components=n_components,
+        covariance="full",
+        seed=seed,
+    )
     submaps = list(build_submaps(frames, robot.name, options))
     poses = {(s.robot, s.seq): s.anchor for s in submaps}
     gmm = build_global_map(submaps, poses, robot.name).gmm.transform(robot.map_to_world)
@@ -175,7 +184,7 @@ def _score(world, path, success: bool, per_step: float, options: PlannerOptions)
 
 
 def evaluate_scene(
-    name: str, options: PlannerOptions | None = None, seed: int = 0
+    name: str, options: PlannerOptions | None = None, seed: int = 0, n_components: int = 200
 ) -> tuple[dict, dict]:
     """Scores both planners on one scene; returns (scores, what a plot needs)."""
     from gmmap.sim import get_world
@@ -184,7 +193,7 @@ def evaluate_scene(
     world = get_world(name)
     if world.start is None or world.goal is None:
         raise InvalidInputError(f"world {name!r} has no planning task (start and goal)")
-    scene = map_scene(world, seed=seed)
+    scene = map_scene(world, seed=seed, n_components=n_components)
     start, goal = np.array(world.start[:2]), np.array(world.goal)
 
     gmm_run: PlanResult = plan(scene.gmm, start, goal, options)
@@ -219,6 +228,7 @@ def evaluate_planners(
     seed: int = 0,
     plot_dir: str | os.PathLike | None = None,
     progress: Progress | None = None,
+    n_components: int = 200,
 ) -> dict:
     """Table II: both planners on every scene (``gmmap eval planner --json``)."""
     options = options or PlannerOptions()
@@ -226,7 +236,7 @@ def evaluate_planners(
     for name in scenes:
         if progress:
             progress(f"{name}: mapping and planning")
-        scores, drawing = evaluate_scene(name, options, seed)
+        scores, drawing = evaluate_scene(name, options, seed, n_components)
         result["scenes"][name] = scores
         if plot_dir is not None:
             os.makedirs(plot_dir, exist_ok=True)
