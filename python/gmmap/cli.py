@@ -595,10 +595,11 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
         )
     m = report.get("match_errors", {})
     if m.get("n"):
-        click.echo(
-            f"kept matches vs truth: median {m['t_median'] * 100:.1f} cm / "
-            f"{m['r_median_deg']:.2f}°, max {m['t_max'] * 100:.1f} cm / {m['r_max_deg']:.2f}°"
-        )
+        from gmmap.eval.registration import describe_errors
+
+        click.echo(f"kept matches vs truth: {describe_errors(m)}")
+        if m["optimised"].get("n"):
+            click.echo(f"  the same, optimised: {describe_errors(m['optimised'])}")
     if "injected_wrong" in report:
         w = report["injected_wrong"]
         click.echo(f"injected wrong matches: {w['rejected']} of {w['n']} rejected")

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.datasets.geometry import invert
-from gmmap.eval.registration import error_summary, pose_errors
+from gmmap.eval.registration import describe_errors, error_summary, pose_errors
 from gmmap.transport import free_port
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
@@ -239,18 +239,9 @@ def format_report(r: dict) -> str:
         )
     m = r.get("match_errors", {})
     if m.get("n"):
-        lines.append(
-            f"where they met {m['n']} registrations kept by the backend, vs truth: median "
-            f"{m['t_median']:.3f} m / {m['r_median_deg']:.2f}°, max {m['t_max']:.3f} m / "
-            f"{m['r_max_deg']:.2f}°; {m['within_5cm_1deg']:.0%} within 5 cm and 1°"
-        )
-        o = m["optimised"]
-        if o.get("n"):
-            lines.append(
-                f"                the same pairs optimised: median {o['t_median']:.3f} m / "
-                f"{o['r_median_deg']:.2f}°, max {o['t_max']:.3f} m / {o['r_max_deg']:.2f}°; "
-                f"{o['within_5cm_1deg']:.0%} within 5 cm and 1°"
-            )
+        lines.append(f"where they met  {m['n']} kept registrations vs truth: {describe_errors(m)}")
+        if m["optimised"].get("n"):
+            lines.append(f"                the same, optimised: {describe_errors(m['optimised'])}")
     lines.append(f"map             {r.get('map_png')}")
     if r.get("map_rrd"):
         lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")

@@ -63,6 +63,16 @@ def error_summary(errors: Sequence[tuple[float, float]]) -> dict:
     }
 
 
+def describe_errors(summary: dict) -> str:
+    """One line for an `error_summary`."""
+    s = summary
+    return (
+        f"median {s['t_median'] * 100:.1f} cm / {s['r_median_deg']:.2f}°, max "
+        f"{s['t_max'] * 100:.1f} cm / {s['r_max_deg']:.2f}°; {s['within_5cm_1deg']:.0%} within "
+        "5 cm and 1°"
+    )
+
+
 def random_perturbation(rng: np.random.Generator) -> np.ndarray:
     """A yaw uniform in ±(0–180°) and a translation uniform in the 1 m ball."""
     yaw = rng.uniform(0, math.pi) * rng.choice([-1, 1])
