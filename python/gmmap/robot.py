@@ -49,13 +49,13 @@ from gmmap.datasets.frame import Frame
 from gmmap.place import PlaceDatabase, PlaceOptions
 from gmmap.store import Edge, Store
 from gmmap.submap import BuildOptions, Submap, SubmapBuilder
+from gmmap.tfgraph import TfGraph
+from gmmap.transport import Transport, TransportConfig
 
 try:
     import resource
 except ImportError:  # Windows: no getrusage
     resource = None  # type: ignore[assignment]
-from gmmap.tfgraph import TfGraph
-from gmmap.transport import Transport, TransportConfig
 
 __all__ = ["RobotConfig", "RobotNode", "run_robot"]
 
