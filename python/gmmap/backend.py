@@ -502,26 +502,11 @@ class PoseGraph:
                 links[a].append((1, b, T_ab))
                 links[b].append((1, a, invert(T_ab)))
         robots = sorted(self._seqs)
-        previous = {
-            (a, b): invert(self._frame[a]) @ self._frame[b]
-            for a in robots
-            for b in robots
-            if a != b
-            and a in self._frame
-            and b in self._frame
-            and self._reference[a] == self._reference[b]
-        }
-        # Last time's frames, unless a match kept now (PCM-consistent) contradicts one of them:
-        # they came from matches since rejected, and LM or GNC started there would stay in
-        # that wrong basin; then every frame starts from today's matches.
-        stale = False
-        for (a, b), m in chosen.items():
-            if (a, b) in previous:
-                direct = local[m.target] @ m.transform @ invert(local[m.source])
-                stale |= not _close(direct, previous[(a, b)])
-        if not (stale or fresh):
-            for (a, b), T_ab in previous.items():
-                links[a].append((0, b, T_ab))
+        for a in [] if fresh else robots:
+            for b in robots:
+                known = a != b and a in self._frame and b in self._frame
+                if known and self._reference[a] == self._reference[b]:
+                    links[a].append((0, b, invert(self._frame[a]) @ self._frame[b]))
         frames: dict[str, np.ndarray] = {}
         for robot in robots:
             if reference[robot] != robot:
@@ -843,13 +828,6 @@ def _components(robots: list[str], matches: list[Match]) -> list[list[str]]:
     return sorted(sorted(g) for g in groups.values())
 
 
-def _close(a: np.ndarray, b: np.ndarray, metres: float = 1.0, degrees: float = 15.0) -> bool:
-    """Whether two rigid transforms are within ``metres`` and ``degrees`` of each other."""
-    d = invert(a) @ b
-    angle = float(np.ravel(rotation_angle(d[:3, :3]))[0])
-    return bool(np.linalg.norm(d[:3, 3]) <= metres and math.degrees(angle) <= degrees)
-
-
 def _better(
     graph_a: gtsam.NonlinearFactorGraph,
     values_a: gtsam.Values,
@@ -863,7 +841,7 @@ def _better(
     odometry, priors and kept matches."""
 
     def score(graph, values, weights) -> tuple[int, float]:
-        kept = [k for k in range(n_known)] + [n_known + i for i, w in enumerate(weights) if w > 0.5]
+        kept = [*range(n_known), *(n_known + i for i, w in enumerate(weights) if w > 0.5)]
         return -len(kept), sum(graph.at(k).error(values) for k in kept)
 
     return score(graph_a, values_a, weights_a) < score(graph_b, values_b, weights_b)
