@@ -91,6 +91,8 @@ def test_analytic_gradient_matches_finite_differences():
         fd = (field.occupancy(xy + step) - field.occupancy(xy - step)) / (2 * h)
         assert np.allclose(grad[:, axis], fd, rtol=1e-4, atol=1e-6)
     assert (occ >= 0).all()
+    far_occ, far_grad = field.gradient([(30.0, 30.0), (1e3, -1e3)])  # terms underflow there
+    assert np.isfinite(far_grad).all() and np.allclose(far_occ, 0.0)
 
 
 def test_occupancy_is_high_on_a_surface_and_the_level_at_radius_plus_margin():

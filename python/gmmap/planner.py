@@ -98,10 +98,13 @@ class OccupancyField:
         if not len(self):
             return np.zeros(len(xy)), np.zeros((len(xy), 2))
         a, pd = self._terms(xy)
-        ap = a**SOFTMAX_POWER
-        occ = ap.sum(axis=1) ** (1 / SOFTMAX_POWER)
-        weight = ap / np.maximum(occ, 1e-300)[:, None] ** (SOFTMAX_POWER - 1)
-        return occ, -(weight[..., None] * pd).sum(axis=1)
+        # Scaled by the largest term: far from every surface the a_k^p underflow to zero.
+        top = a.max(axis=1, keepdims=True)
+        r = np.divide(a, top, out=np.zeros_like(a), where=top > 0)
+        s = (r**SOFTMAX_POWER).sum(axis=1, keepdims=True) ** (1 / SOFTMAX_POWER)
+        s = np.where(s > 0, s, 1.0)
+        weight = a * (r / s) ** (SOFTMAX_POWER - 1)  # d o / d a_k = (a_k / o)^(p-1)
+        return (top * s)[:, 0], -(weight[..., None] * pd).sum(axis=1)
 
 
 def _footprints(cov: np.ndarray, radius: float, level: float) -> np.ndarray:
