@@ -14,6 +14,7 @@ from gmmap.em import fit_gmm
 from gmmap.errors import InvalidInputError
 from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.merge import MergeOptions, merge
+from gmmap.place import PlaceOptions
 from gmmap.submap import BuildOptions, Submap, build_submaps
 
 
@@ -72,8 +73,12 @@ def slice_robots():
     }
 
 
+# Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
+SLICE_OPTIONS = MergeOptions(PlaceOptions(min_confidence=0.55))
+
+
 def test_merge_recovers_the_relative_frame(slice_robots):
-    result = merge(slice_robots)
+    result = merge(slice_robots, SLICE_OPTIONS)
     report = result.report(slice_robots)
     assert report["groups"] == [["a", "b"]]
     assert report["accepted_edges"] >= 1
@@ -89,8 +94,10 @@ def test_merge_cli_json(tmp_path, slice_robots):
         write_submaps(subs, tmp_path / name)
     out = tmp_path / "out"
     r = CliRunner().invoke(
-        main, ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out), "--json"]
-    )
+        main,
+        ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out), "--json",
+         "--min-confidence", "0.55"],
+    )  # fmt: skip
     assert r.exit_code == 0, r.output
     report = json.loads(r.stdout)
     assert report["reference"] == "a"

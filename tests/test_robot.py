@@ -11,12 +11,15 @@ import pytest
 
 from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.eval.registration import pose_errors
+from gmmap.place import PlaceOptions
 from gmmap.robot import RobotConfig, RobotNode
 from gmmap.store import Store
 from gmmap.submap import BuildOptions
 from gmmap.transport import free_port
 
 SLICE_BUILD = BuildOptions(frames_per_submap=2, covariance="full", n_components=60)
+# Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
+SLICE_PLACE = PlaceOptions(min_confidence=0.55)
 
 
 def robot_cmd(name, fleet, port, peers, store, report, frames, *extra):
@@ -25,7 +28,8 @@ def robot_cmd(name, fleet, port, peers, store, report, frames, *extra):
         "--id", name, "--fleet", fleet, "--data", str(BUNDLED_TUM_SLICE), "--stride", "2",
         "--frames", frames, "--frames-per-submap", "2", "--covariance", "full",
         "--components", "60", "--port", str(port), "--store", str(store),
-        "--report", str(report), "--linger", "1.5", "--json", *extra,
+        "--report", str(report), "--linger", "1.5", "--min-confidence", "0.55", "--json",
+        *extra,
     ]  # fmt: skip
     for p in peers:
         cmd += ["--peer", f"tcp/127.0.0.1:{p}"]
@@ -83,7 +87,8 @@ def frames():
 def node(tmp_path, name, port, peers=(), fleet="f", **kw):
     config = RobotConfig(
         robot=name, fleet=fleet, store=tmp_path / f"{name}.db", port=port,
-        connect=tuple(f"tcp/127.0.0.1:{p}" for p in peers), build=SLICE_BUILD, **kw,
+        connect=tuple(f"tcp/127.0.0.1:{p}" for p in peers), build=SLICE_BUILD,
+        place=SLICE_PLACE, **kw,
     )  # fmt: skip
     return RobotNode(config)
 

@@ -116,6 +116,9 @@ def demo(
     show_default=True,
     help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
 )
+@click.option(
+    "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
+)
 @click.option("--linger", default=5.0, show_default=True, help="Seconds to stay after mapping.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
@@ -148,6 +151,7 @@ def robot(
     components: int,
     covariance: str,
     odometry_drift: float,
+    min_confidence: float,
     linger: float,
     report_path: Path | None,
     map_png: Path | None,
@@ -155,6 +159,7 @@ def robot(
 ) -> None:
     """Run one robot node: map, share submaps over Zenoh, match, optimise, report."""
     from gmmap.backend import BackendOptions
+    from gmmap.place import PlaceOptions
     from gmmap.robot import RobotConfig, run_robot
     from gmmap.submap import BuildOptions
 
@@ -191,6 +196,7 @@ def robot(
         linger=linger,
         wait_for=tuple(wait_for),
         backend=BackendOptions.for_drift(odometry_drift),
+        place=PlaceOptions(min_confidence=min_confidence),
     )
 
     def status(line: dict) -> None:
@@ -509,7 +515,7 @@ def _slice(text: str) -> slice:
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
 @click.option("--top-k", default=5, show_default=True, help="Candidates verified per submap.")
 @click.option(
-    "--min-confidence", default=0.55, show_default=True, help="C_thr of the verification."
+    "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
 )
 @click.option(
     "--wrong-matches",
