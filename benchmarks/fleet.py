@@ -5,8 +5,8 @@ simulated robots in the office world as separate ``gmmap robot`` processes on lo
 320-px depth camera, 20 frames per submap). Per robot: payload bytes sent and received, the
 bytes a point-cloud system would send for the same submaps (voxelised points as float32, the
 baseline of the paper's Fig. 9), CPU seconds (user + system) and peak resident memory, read by
-each robot process from getrusage at its end. Robots beyond the office's five routes drive
-them in reverse.
+each robot process from getrusage at its end; and how right the kept registrations and the
+robots' frames are. Robots beyond the office's five routes drive them in reverse.
 
     .venv/bin/python benchmarks/fleet.py [--robots 2,4,6,8] [--max-frames N]
 """
@@ -57,6 +57,11 @@ def main() -> None:
                 "cpu_s": per_robot({k: v and v["cpu_s"] for k, v in res.items()}),
                 "max_rss_mb": per_robot({k: v and v["max_rss_mb"] for k, v in res.items()}),
                 "groups": r["groups"],
+                "kept_matches_vs_truth": r["match_errors"],
+                "frames_vs_truth_max": {
+                    "t": max((p["t_error"] or 0.0) for p in r["pairs"]),
+                    "r_deg": max((p["r_error_deg"] or 0.0) for p in r["pairs"]),
+                },
             }
         )
         print(json.dumps(rows[-1]), file=sys.stderr)
