@@ -151,6 +151,9 @@ class PlaceOptions:
     top_k: int = 5
     max_distance: float = 0.1
     min_confidence: float = 0.75
+    # Reject when another basin scores this close to the best (alternative / confidence):
+    # the geometry is ambiguous, e.g. a corridor seen end for end.
+    max_ambiguity: float = 0.85
     skip_recent: int = 2
     resample_points: int = RESAMPLE_POINTS
     dof: int = 6
@@ -161,6 +164,8 @@ class PlaceOptions:
             raise InvalidInputError("top_k >= 1, resample_points >= 2, skip_recent >= 0")
         if not 0 <= self.min_confidence <= 1 or not 0 <= self.max_distance <= 2:
             raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2]")
+        if not 0 < self.max_ambiguity <= 1:
+            raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
 
 
 @dataclass
@@ -236,7 +241,8 @@ class PlaceDatabase:
 
     def verify(self, robot: str, seq: int, gmm: Gmm, candidate: Candidate) -> Match:
         """Registers the query onto the candidate with no initial guess (yaw hint from the
-        descriptor when it has one) and accepts it when C ≥ ``min_confidence``."""
+        descriptor when it has one) and accepts it when C ≥ ``min_confidence`` and no other
+        solution comes within ``max_ambiguity`` of it."""
         target = self.gmms[(candidate.robot, candidate.seq)]
         if target is None:
             raise InvalidInputError(f"{candidate.robot}/{candidate.seq} has no GMM to verify")
@@ -245,7 +251,9 @@ class PlaceDatabase:
             n = self.options.resample_points
             hint = self.descriptor.yaw(resample(gmm, n), resample(target, n))
         reg = register(gmm, target, yaw_hint=hint, dof=self.options.dof)
-        return Match((robot, seq), candidate, reg, reg.confidence >= self.options.min_confidence)
+        confident = reg.confidence >= self.options.min_confidence
+        unambiguous = reg.alternative_confidence <= self.options.max_ambiguity * reg.confidence
+        return Match((robot, seq), candidate, reg, confident and unambiguous)
 
     def match(self, robot: str, seq: int, gmm: Gmm) -> list[Match]:
         """Candidates for a submap, each verified: accepted and rejected matches."""

@@ -45,6 +45,9 @@ class Registration:
     information: np.ndarray
     iterations: int
     time_s: float
+    # Without ``init``: the confidence of the best solution in another basin (30° or 0.5 m
+    # away), 0 if none. Close to ``confidence``: ambiguous geometry (a corridor end for end).
+    alternative_confidence: float = 0.0
 
 
 def register(
@@ -88,7 +91,7 @@ def register(
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
     scale = float(information_scale or min(len(source), len(target)))
     start = time.perf_counter()
-    T, confidence, info, iterations = _core.register_gmm(
+    T, confidence, info, iterations, alternative = _core.register_gmm(
         (source.weights, source.means, source.covariances),
         (target.weights, target.means, target.covariances),
         init,
@@ -100,7 +103,8 @@ def register(
         scale,
         float(confidence_scale),
     )
-    return Registration(T, float(confidence), info, int(iterations), time.perf_counter() - start)
+    elapsed = time.perf_counter() - start
+    return Registration(T, float(confidence), info, int(iterations), elapsed, float(alternative))
 
 
 def confidence(

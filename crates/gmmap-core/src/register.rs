@@ -122,6 +122,10 @@ pub struct Registration {
     /// 6x6 information of ξ = (ω, v) (left perturbation, rotation first).
     pub information: [[f64; 6]; 6],
     pub iterations: usize,
+    /// Without an initial guess: the confidence of the best solution distinct from this one
+    /// (another basin, 30° or 0.5 m away), 0 when every start ends here. Near `confidence`, the
+    /// geometry is ambiguous (a corridor seen end for end, a room one over).
+    pub alternative: f64,
 }
 
 fn mat_vec(m: &[[f64; 3]; 3], v: &[f64; 3]) -> [f64; 3] {
@@ -426,6 +430,21 @@ fn symmetrise(h: &mut [[f64; 6]; 6]) {
 }
 
 impl Problem<'_> {
+    /// Down the coarse-to-fine ladder from `start`: the pose, the unwidened evaluation with
+    /// derivatives (for the information) and the iterations.
+    fn refine(&self, start: Pose, opts: &RegisterOptions) -> (Pose, Eval, usize) {
+        let (mut pose, mut last, mut iterations) = (start, None, 0);
+        for s in &opts.scales {
+            let (p, e, it) = self.optimise(pose, s * s, opts);
+            pose = p;
+            iterations += it;
+            last = (*s == 0.0).then_some(e);
+        }
+        // Already at hand when the ladder ends at 0.
+        let fin = last.unwrap_or_else(|| self.evaluate(&pose, 0.0, true));
+        (pose, fin, iterations)
+    }
+
     /// LM ascent on log F at one scale; returns the pose, its evaluation and the iterations.
     fn optimise(&self, mut pose: Pose, s2: f64, opts: &RegisterOptions) -> (Pose, Eval, usize) {
         let dims: &[usize] = if opts.four_dof {
@@ -521,8 +540,9 @@ pub fn register(
     let problem = Problem::new(source, target, opts.cutoff);
     let coarse = opts.scales[0] * opts.scales[0];
     let mut iterations = 0;
-    let start = match init {
-        Some(pose) => pose,
+    // Coarse solutions, best first: with a guess just the guess.
+    let starts: Vec<Pose> = match init {
+        Some(pose) => vec![pose],
         None => {
             let yaws: Vec<f64> = match yaw_hint {
                 Some(y) => vec![y, y - 0.5, y + 0.5],
@@ -531,31 +551,23 @@ pub fn register(
                     .collect(),
             };
             let (ms, mt) = (weighted_mean(source), weighted_mean(target));
-            let mut best = (f64::NEG_INFINITY, Pose::IDENTITY);
+            let mut found: Vec<(f64, Pose)> = Vec::new();
             for yaw in yaws {
                 let mut pose = Pose::yaw(yaw);
                 let rm = mat_vec(&pose.r, &ms);
                 pose.t = [mt[0] - rm[0], mt[1] - rm[1], mt[2] - rm[2]];
                 let (p, e, it) = problem.optimise(pose, coarse, opts);
-                let f = e.f;
                 iterations += it;
-                if f > best.0 {
-                    best = (f, p);
-                }
+                found.push((e.f, p));
             }
-            best.1
+            found.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let best = found[0].1;
+            let runner = found.iter().map(|x| x.1).find(|p| distinct(p, &best));
+            std::iter::once(best).chain(runner).collect()
         }
     };
-    let mut pose = start;
-    let mut last = None;
-    for s in &opts.scales {
-        let (p, e, it) = problem.optimise(pose, s * s, opts);
-        pose = p;
-        iterations += it;
-        last = (*s == 0.0).then_some(e);
-    }
-    // The curvature at the solution, unwidened (already at hand when the ladder ends at 0).
-    let fin = last.unwrap_or_else(|| problem.evaluate(&pose, 0.0, true));
+    let (pose, fin, it) = problem.refine(starts[0], opts);
+    iterations += it;
     let c2 = opts.confidence_scale * opts.confidence_scale;
     // ∫f², ∫g² and ∫T(f)g, all widened by c2 and pruned alike (evaluate adds c2 to each side).
     let self_overlap = |g: &Gmm| {
@@ -564,7 +576,19 @@ pub fn register(
             .f
     };
     let norm = (self_overlap(source) * self_overlap(target)).sqrt();
-    let overlap = problem.evaluate(&pose, c2, false).f;
+    let confidence_at = |p: &Pose| (problem.evaluate(p, c2, false).f / norm).clamp(0.0, 1.0);
+    let alternative = match starts.get(1) {
+        Some(start) => {
+            let (other, _, it) = problem.refine(*start, opts);
+            iterations += it;
+            if distinct(&other, &pose) {
+                confidence_at(&other)
+            } else {
+                0.0
+            }
+        }
+        None => 0.0,
+    };
     let mut h = fin.h;
     symmetrise(&mut h);
     let scale = if fin.f > 0.0 {
@@ -574,10 +598,25 @@ pub fn register(
     };
     Ok(Registration {
         transform: pose,
-        confidence: (overlap / norm).clamp(0.0, 1.0),
+        confidence: confidence_at(&pose),
         information: h.map(|r| r.map(|v| v * scale)),
         iterations,
+        alternative,
     })
+}
+
+/// Whether two poses lie in different basins: 30° or 0.5 units apart.
+fn distinct(a: &Pose, b: &Pose) -> bool {
+    let dt = (0..3)
+        .map(|k| (a.t[k] - b.t[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    // trace(Raᵀ Rb) = 1 + 2 cos θ
+    let trace: f64 = (0..3)
+        .map(|k| (0..3).map(|r| a.r[r][k] * b.r[r][k]).sum::<f64>())
+        .sum();
+    let cos = ((trace - 1.0) / 2.0).clamp(-1.0, 1.0);
+    dt > 0.5 || cos < 30f64.to_radians().cos()
 }
 
 #[cfg(test)]
@@ -728,6 +767,35 @@ mod tests {
         let r = register(&source, &target, Some(Pose::IDENTITY), None, &opts).unwrap();
         assert!(error(&r.transform, &truth) < 1e-4);
         assert_eq!(r.transform.r[2], [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn a_corridor_end_for_end_is_an_alternative_and_a_room_is_not() {
+        // Two parallel walls and a floor, symmetric under a half turn about +z.
+        let mut corridor = Gmm {
+            weights: vec![],
+            means: vec![],
+            covariances: vec![],
+        };
+        for x in -4..=4 {
+            for (y, c) in [
+                (-1.0, Sym3::diag(0.06, 1e-4, 0.1)),
+                (1.0, Sym3::diag(0.06, 1e-4, 0.1)),
+                (0.0, Sym3::diag(0.06, 0.06, 1e-4)),
+            ] {
+                corridor.weights.push(1.0 / 27.0);
+                corridor
+                    .means
+                    .push([x as f64 * 0.8, y, if y == 0.0 { 0.0 } else { 1.0 }]);
+                corridor.covariances.push(c);
+            }
+        }
+        let opts = RegisterOptions::default();
+        let r = register(&corridor, &corridor, None, None, &opts).unwrap();
+        assert!(r.confidence > 0.99 && r.alternative > 0.9 * r.confidence);
+        let room = scene();
+        let r = register(&room, &room, None, None, &opts).unwrap();
+        assert!(r.confidence > 0.99 && r.alternative < 0.8 * r.confidence);
     }
 
     #[test]

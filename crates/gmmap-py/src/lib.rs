@@ -224,9 +224,11 @@ type RegisterOutput<'py> = (
     f64,
     Bound<'py, PyArray2<f64>>,
     usize,
+    f64,
 );
 
-/// GMM-to-GMM registration: (transform 4x4, confidence, information 6x6, iterations).
+/// GMM-to-GMM registration: (transform 4x4, confidence, information 6x6, iterations,
+/// the best distinct solution's confidence).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale))]
@@ -271,7 +273,7 @@ fn register_gmm<'py>(
     let t = PyArray1::from_vec(py, r.transform.to_matrix().to_vec()).reshape([4, 4])?;
     let info = PyArray1::from_vec(py, r.information.iter().flatten().copied().collect())
         .reshape([6, 6])?;
-    Ok((t, r.confidence, info, r.iterations))
+    Ok((t, r.confidence, info, r.iterations, r.alternative))
 }
 
 /// A submap's point buffer: voxel cells with exact centroids (see gmmap-core).
