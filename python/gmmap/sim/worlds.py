@@ -67,8 +67,11 @@ def office() -> World:
     s += table(13.0, 8.6, yaw=math.pi / 2) + table(18.0, 8.0) + pillar(16.0, 7.4)
     s += chair(18.0, 7.2, math.pi / 2) + cabinet(19.5, 9.0, yaw=math.pi / 2)
     s += cabinet(11.8, 9.6)
-    # Corridor: a pillar against each of its walls.
+    # Corridor: a pillar against each of its walls; a copier bank and a stair core at the
+    # east end (a corridor looks the same end for end without them).
     s += pillar(7.9, 5.75, 0.15) + pillar(12.2, 4.25, 0.15)
+    s += cabinet(19.55, 4.75, w=1.3, d=0.7, h=1.3, yaw=math.pi / 2)
+    s += [Box((19.2, 5.6, WALL_HEIGHT / 2), (1.6, 0.7, WALL_HEIGHT))]
     routes = [
         [(1.5, 2.6), (2.5, 3.0), (2.5, 5.0), (9.0, 5.0), (9.0, 3.0), (11.5, 2.6)],  # A → B
         [(10.0, 3.0), (9.0, 3.3), (9.0, 5.0), (15.5, 5.0), (15.5, 6.8), (17.0, 6.8)],  # B → E
