@@ -241,8 +241,7 @@ class PlaceDatabase:
 
     def verify(self, robot: str, seq: int, gmm: Gmm, candidate: Candidate) -> Match:
         """Registers the query onto the candidate with no initial guess (yaw hint from the
-        descriptor when it has one) and accepts it when C ≥ ``min_confidence`` and no other
-        solution comes within ``max_ambiguity`` of it."""
+        descriptor when it has one) and accepts it when its `score` ≥ ``min_confidence``."""
         target = self.gmms[(candidate.robot, candidate.seq)]
         if target is None:
             raise InvalidInputError(f"{candidate.robot}/{candidate.seq} has no GMM to verify")
@@ -251,9 +250,16 @@ class PlaceDatabase:
             n = self.options.resample_points
             hint = self.descriptor.yaw(resample(gmm, n), resample(target, n))
         reg = register(gmm, target, yaw_hint=hint, dof=self.options.dof)
-        confident = reg.confidence >= self.options.min_confidence
-        unambiguous = reg.alternative_confidence <= self.options.max_ambiguity * reg.confidence
-        return Match((robot, seq), candidate, reg, confident and unambiguous)
+        return Match((robot, seq), candidate, reg, self.score(reg) >= self.options.min_confidence)
+
+    def score(self, reg: Registration) -> float:
+        """The confidence C, scaled down to 0 as the best other basin's confidence rises from
+        ``max_ambiguity``·C to C (a corridor seen end for end scores near 0)."""
+        if reg.confidence <= 0:
+            return 0.0
+        ratio = reg.alternative_confidence / reg.confidence
+        margin = 1.0 - self.options.max_ambiguity
+        return reg.confidence * (min(1.0, (1.0 - ratio) / margin) if margin > 0 else 1.0)
 
     def match(self, robot: str, seq: int, gmm: Gmm) -> list[Match]:
         """Candidates for a submap, each verified: accepted and rejected matches."""

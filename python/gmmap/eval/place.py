@@ -125,7 +125,7 @@ def verify_gmm(source: Submap, target: Submap, db: PlaceDatabase) -> tuple[float
         n = db.options.resample_points
         hint = db.descriptor.yaw(resample(source.gmm, n), resample(target.gmm, n))
     r = register(source.gmm, target.gmm, yaw_hint=hint, dof=db.options.dof)
-    return r.confidence, r.transform
+    return db.score(r), r.transform
 
 
 def verify_gicp(source: Submap, target: Submap, voxel: float, yaw_starts: int = 12):
