@@ -135,7 +135,7 @@ def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, 
         b.stop()
 
 
-def test_the_owner_answers_fetches_and_a_holder_answers_when_it_is_away(tmp_path, frames):
+def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(tmp_path, frames):
     pa, pb = free_port(), free_port()
     b = node(tmp_path, "b", pb)
     b.start()
@@ -150,6 +150,12 @@ def test_the_owner_answers_fetches_and_a_holder_answers_when_it_is_away(tmp_path
         a.stop()
         assert wait(lambda: "a" not in b.transport.peers())
         assert [seq for seq, _ in b._serve("a", "submap", 0)] == [0]
+        c = node(tmp_path, "c", free_port(), [pb])  # joins after a left: b hands a's submap on
+        c.start()
+        try:
+            assert wait(lambda: c.store.seqs("a") == [0])
+        finally:
+            c.stop()
     finally:
         b.stop()
 

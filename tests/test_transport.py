@@ -265,6 +265,23 @@ def test_fetch_what_was_missed(tmp_path: Path):
             assert a.stats()["queries"]["served"] == 4
 
 
+def test_fetch_unknown_names_the_robots_a_newcomer_never_met(tmp_path: Path):
+    port_a = free_port()
+    with (
+        Store(tmp_path / "a.db") as store,
+        Transport(TransportConfig("lab", "a", port=port_a)) as a,
+    ):
+        a.serve(store.fetch_provider, store.robots)
+        store.put_submap("a", 0, b"own", own=True)
+        store.put_submap("gone", 0, b"g0")
+        store.put_submap("gone", 1, b"g1")
+        with Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b:
+            assert b.wait_for_peers(["a"], WAIT)
+            got = b.fetch_unknown({"a", "b"}, timeout=WAIT)
+            assert got == {"gone": [(0, b"g0"), (1, b"g1")]}
+            assert b.fetch_unknown({"a", "b", "gone"}, timeout=WAIT) == {}
+
+
 def test_fetch_without_servers_returns_empty(pair):
     _, b = pair
     start = time.monotonic()

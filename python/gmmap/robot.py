@@ -164,7 +164,7 @@ class RobotNode:
 
     def start(self) -> None:
         t = self.transport
-        t.serve(self._serve)
+        t.serve(self._serve, self.store.robots)
         t.subscribe(lambda robot, kind, seq, payload: self._receive(robot, kind, seq, payload))
         t.on_join(lambda robot: self.fetch_queue.put(robot))
         for name, target in (
@@ -330,13 +330,20 @@ class RobotNode:
             gaps = [seq for seq in range(max(have) + 1) if seq not in have] if have else []
             since = gaps[0] if gaps else (max(have) + 1 if have else 0)
             for seq, payload in self.transport.fetch(r, KIND, since):
-                with self._lock:
-                    if seq in self._arrived.setdefault(r, set()):
-                        continue
-                    self._arrived[r].add(seq)
-                    self._busy += 1
-                self.counts["fetched"] += 1
-                self.inbox.put(("fetched", r, seq, payload))
+                self._enqueue_fetched(r, seq, payload)
+        # Robots no one present has named: those that left before we came.
+        for r, held in self.transport.fetch_unknown(robots | {self.robot}, KIND).items():
+            for seq, payload in held:
+                self._enqueue_fetched(r, seq, payload)
+
+    def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
+        with self._lock:
+            if seq in self._arrived.setdefault(robot, set()):
+                return
+            self._arrived[robot].add(seq)
+            self._busy += 1
+        self.counts["fetched"] += 1
+        self.inbox.put(("fetched", robot, seq, payload))
 
     def _transmission(self) -> None:
         while True:

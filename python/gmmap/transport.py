@@ -5,6 +5,7 @@ Key expressions (``<fleet>``, ``<robot>``, ``<kind>`` are names, ``<seq>`` a dec
     gmmap/<fleet>/<robot>/<kind>/<seq>     one message (a put); payload = the encoded bytes
     gmmap/<fleet>/<robot>                  liveliness token: the robot is present
     gmmap/<fleet>/<robot>/<kind>/*?since=N fetch query: everything of that robot and kind, seq ≥ N
+    gmmap/<fleet>/*/<kind>/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
 
 Every robot that called :meth:`Transport.serve` answers fetch queries from its provider (its
 store), for its own data and for other robots' data it holds, so a robot that was away can catch
@@ -77,6 +78,7 @@ MessageCallback = Callable[[str, str, int, bytes], None]
 PeerCallback = Callable[[str], None]
 """``callback(robot)`` when a robot of the fleet joins or leaves."""
 FetchProvider = Callable[[str, str, int], Iterable[tuple[int, bytes]]]
+Roster = Callable[[], Iterable[str]]
 """``provider(robot, kind, since_seq)`` → the held ``(seq, payload)`` pairs with seq ≥ since_seq."""
 
 
@@ -343,6 +345,7 @@ class Transport:
         self._join_callbacks: list[PeerCallback] = []
         self._leave_callbacks: list[PeerCallback] = []
         self._provider: FetchProvider | None = None
+        self._roster: Roster | None = None
         self._data_subscriber: Any = None
         self._queryable: Any = None
         self._probes: dict[str, zenoh.Publisher] = {}
@@ -566,15 +569,16 @@ class Transport:
 
     # ---- fetch ------------------------------------------------------------------------------
 
-    def serve(self, provider: FetchProvider) -> None:
+    def serve(self, provider: FetchProvider, roster: Roster | None = None) -> None:
         """Answer other robots' fetch queries with ``provider(robot, kind, since_seq)``, which
-        returns the ``(seq, payload)`` pairs held (own or received) with seq ≥ since_seq. It runs
-        on the transport's query thread. Calling again replaces the provider."""
+        returns the ``(seq, payload)`` pairs held (own or received) with seq ≥ since_seq, and,
+        with ``roster()`` (the robots held), `fetch_unknown` queries. It runs on the
+        transport's query thread. Calling again replaces both."""
         self._check_open()
-        if not callable(provider):
+        if not callable(provider) or (roster is not None and not callable(roster)):
             raise TransportConfigError(f"provider must be callable; got {provider!r}")
         with self._lock:
-            self._provider = provider
+            self._provider, self._roster = provider, roster
         with self._declare_lock:
             if self._queryable is not None:
                 return
@@ -597,23 +601,28 @@ class Transport:
                 return
             _, robot, kind, since = request
             with self._lock:
-                provider = self._provider
+                provider, roster = self._provider, self._roster
             if provider is None or self._closed:
                 return
             self._counters.bump("queries_served")
             try:
-                held = list(provider(robot, kind, since))
+                if robot == "*":  # fetch_unknown: every robot held but those named in skip
+                    skip = set(query.parameters.get("skip", "").split(","))
+                    robots = sorted(set(roster() if roster else ()) - skip - {""})
+                else:
+                    robots = [robot]
+                held = [(r, seq, p) for r in robots for seq, p in provider(r, kind, since)]
             except Exception as err:
                 log.exception("gmmap transport: fetch provider failed for %s/%s", robot, kind)
                 query.reply_err(f"provider failed: {err}".encode())
                 return
-            for seq, payload in held:
+            for r, seq, payload in held:
                 if not isinstance(seq, int) or seq < since:
                     continue
                 data = _as_bytes(payload)
-                key = data_key(self.fleet, robot, kind, seq)
+                key = data_key(self.fleet, r, kind, seq)
                 query.reply(key, data)
-                self._counters.add("sent", robot, kind, len(data), len(key.encode()), True)
+                self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
         finally:
             # Finalises the query: the requester's get() ends without waiting for its timeout.
             with contextlib.suppress(Exception):
@@ -667,6 +676,44 @@ class Transport:
             found.setdefault(parsed[3], payload)
         return sorted(found.items())
 
+    def fetch_unknown(
+        self, known: Iterable[str], kind: str = DEFAULT_KIND, timeout: float | None = None
+    ) -> dict[str, list[tuple[int, bytes]]]:
+        """Ask the present peers for the messages of ``kind`` of every robot not in ``known``:
+        how a robot that joins late learns of robots that left before it came. Returns
+        ``{robot: [(seq, payload)]}`` sorted by seq, the first reply per message winning."""
+        self._check_open()
+        _check_name("kind", kind)
+        skip = sorted({_check_name("robot", r) for r in known})
+        timeout = self.config.fetch_timeout if timeout is None else float(timeout)
+        if not timeout > 0:
+            raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
+        selector = f"{PREFIX}/{self.fleet}/*/{kind}/*?since=0;skip={','.join(skip)}"
+        self._counters.bump("queries_sent")
+        try:
+            replies = self._session.get(
+                selector,
+                target=zenoh.QueryTarget.ALL,
+                consolidation=zenoh.ConsolidationMode.NONE,
+                timeout=timeout,
+                allowed_destination=zenoh.Locality.REMOTE,
+            )
+        except zenoh.ZError as err:
+            raise TransportError(f"cannot query {selector}: {err}") from err
+        found: dict[str, dict[int, bytes]] = {}
+        for reply in replies:
+            sample = reply.ok
+            parsed = parse_data_key(str(sample.key_expr)) if sample is not None else None
+            if parsed is None or parsed[0] != self.fleet or parsed[2] != kind or parsed[1] in skip:
+                self._counters.bump("ignored")
+                continue
+            robot, seq = parsed[1], parsed[3]
+            payload = sample.payload.to_bytes()
+            key_bytes = len(str(sample.key_expr).encode())
+            self._counters.add("received", robot, kind, len(payload), key_bytes, True)
+            found.setdefault(robot, {}).setdefault(seq, payload)
+        return {r: sorted(items.items()) for r, items in sorted(found.items())}
+
     # ---- accounting -------------------------------------------------------------------------
 
     def stats(self) -> dict[str, Any]:
@@ -684,8 +731,14 @@ class Transport:
 
 
 def _parse_fetch(key: str, since: str | None) -> tuple[str, str, str, int] | None:
-    """``(fleet, robot, kind, since)`` of a fetch query ``gmmap/<fleet>/<robot>/<kind>/*``."""
+    """``(fleet, robot, kind, since)`` of a fetch query ``gmmap/<fleet>/<robot>/<kind>/*``;
+    robot ``*`` for `fetch_unknown`."""
+    parts = key.split("/")
+    if len(parts) == 5 and parts[2] == "*":
+        key = "/".join([*parts[:2], "x", *parts[3:]])  # a valid name stands in for the check
     parsed = parse_data_key(key.removesuffix("/*") + "/0") if key.endswith("/*") else None
+    if parsed is not None and len(parts) == 5 and parts[2] == "*":
+        parsed = (parsed[0], "*", parsed[2], parsed[3])
     if parsed is None:
         return None
     since_text = "0" if since is None else since
