@@ -645,36 +645,12 @@ class Transport:
         _check_name("robot", robot)
         _check_name("kind", kind)
         _check_seq(since_seq, "since_seq")
-        timeout = self.config.fetch_timeout if timeout is None else float(timeout)
-        if not timeout > 0:
-            raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
-        selector = f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}"
-        self._counters.bump("queries_sent")
-        try:
-            replies = self._session.get(
-                selector,
-                target=zenoh.QueryTarget.ALL,
-                consolidation=zenoh.ConsolidationMode.NONE,
-                timeout=timeout,
-                allowed_destination=zenoh.Locality.REMOTE,
-            )
-        except zenoh.ZError as err:
-            raise TransportError(f"cannot query {selector}: {err}") from err
-        found: dict[int, bytes] = {}
-        for reply in replies:
-            sample = reply.ok
-            if sample is None:
-                log.warning("gmmap transport: a peer failed to answer %s: %s", selector, reply.err)
-                continue
-            key = str(sample.key_expr)
-            parsed = parse_data_key(key)
-            if parsed is None or parsed[:3] != (self.fleet, robot, kind) or parsed[3] < since_seq:
-                self._counters.bump("ignored")
-                continue
-            payload = sample.payload.to_bytes()
-            self._counters.add("received", robot, kind, len(payload), len(key.encode()), True)
-            found.setdefault(parsed[3], payload)
-        return sorted(found.items())
+        found = self._query(
+            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}",
+            timeout,
+            lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
+        )
+        return sorted((seq, payload) for (_, seq), payload in found.items())
 
     def fetch_unknown(
         self, known: Iterable[str], kind: str = DEFAULT_KIND, timeout: float | None = None
@@ -685,10 +661,27 @@ class Transport:
         self._check_open()
         _check_name("kind", kind)
         skip = sorted({_check_name("robot", r) for r in known})
+        found = self._query(
+            f"{PREFIX}/{self.fleet}/*/{kind}/*?since=0;skip={','.join(skip)}",
+            timeout,
+            lambda p: p[0] == self.fleet and p[2] == kind and p[1] not in skip,
+        )
+        out: dict[str, list[tuple[int, bytes]]] = {}
+        for (robot, seq), payload in sorted(found.items()):
+            out.setdefault(robot, []).append((seq, payload))
+        return out
+
+    def _query(
+        self,
+        selector: str,
+        timeout: float | None,
+        accept: Callable[[tuple[str, str, str, int]], bool],
+    ) -> dict[tuple[str, int], bytes]:
+        """Sends a fetch query and keeps the first reply per (robot, seq) whose key ``accept``
+        takes, counting each as received."""
         timeout = self.config.fetch_timeout if timeout is None else float(timeout)
         if not timeout > 0:
             raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
-        selector = f"{PREFIX}/{self.fleet}/*/{kind}/*?since=0;skip={','.join(skip)}"
         self._counters.bump("queries_sent")
         try:
             replies = self._session.get(
@@ -700,19 +693,22 @@ class Transport:
             )
         except zenoh.ZError as err:
             raise TransportError(f"cannot query {selector}: {err}") from err
-        found: dict[str, dict[int, bytes]] = {}
+        found: dict[tuple[str, int], bytes] = {}
         for reply in replies:
             sample = reply.ok
-            parsed = parse_data_key(str(sample.key_expr)) if sample is not None else None
-            if parsed is None or parsed[0] != self.fleet or parsed[2] != kind or parsed[1] in skip:
+            if sample is None:
+                log.warning("gmmap transport: a peer failed to answer %s: %s", selector, reply.err)
+                continue
+            key = str(sample.key_expr)
+            parsed = parse_data_key(key)
+            if parsed is None or not accept(parsed):
                 self._counters.bump("ignored")
                 continue
-            robot, seq = parsed[1], parsed[3]
+            _, robot, kind, seq = parsed
             payload = sample.payload.to_bytes()
-            key_bytes = len(str(sample.key_expr).encode())
-            self._counters.add("received", robot, kind, len(payload), key_bytes, True)
-            found.setdefault(robot, {}).setdefault(seq, payload)
-        return {r: sorted(items.items()) for r, items in sorted(found.items())}
+            self._counters.add("received", robot, kind, len(payload), len(key.encode()), True)
+            found.setdefault((robot, seq), payload)
+        return found
 
     # ---- accounting -------------------------------------------------------------------------
 
