@@ -27,6 +27,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.globalmap import build_global_map
 from gmmap.gmm import Gmm
 from gmmap.planner import OccupancyField, PlannerOptions, PlanResult, plan
+from gmmap.sim.world import World
 from gmmap.submap import BuildOptions, build_submaps
 
 SCENES = ("corner", "passage", "clutter", "front-obstacle")
@@ -44,7 +45,7 @@ class SceneMap:
 
 
 def map_scene(
-    world, frames_per_submap: int = 20, seed: int = 0, n_components: int = 200
+    world: World, frames_per_submap: int = 20, seed: int = 0, n_components: int = 200
 ) -> SceneMap:
     """Drives the scene's route with the default LiDAR and builds the GMM map: full
     covariances and 200 components per submap (a LiDAR submap spans a whole room; with 100,
@@ -165,7 +166,9 @@ def path_length(path: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
 
 
-def clearance(world, path: np.ndarray, z_band: tuple[float, float], spacing=0.02) -> float:
+def clearance(
+    world: World, path: np.ndarray, z_band: tuple[float, float], spacing: float = 0.02
+) -> float:
     """The smallest distance from the path (resampled every ``spacing``) to the true geometry."""
     pts = [path[:1]]
     for a, b in itertools.pairwise(path):
@@ -174,7 +177,9 @@ def clearance(world, path: np.ndarray, z_band: tuple[float, float], spacing=0.02
     return float(world.clearance(np.concatenate(pts), z_band).min())
 
 
-def _score(world, path, success: bool, per_step: float, options: PlannerOptions) -> dict:
+def _score(
+    world: World, path: np.ndarray, success: bool, per_step: float, options: PlannerOptions
+) -> dict:
     return {
         "length": round(path_length(path), 3),
         "success": bool(success),
