@@ -53,6 +53,7 @@ from dataclasses import asdict, dataclass, field
 import gtsam
 import numpy as np
 
+from gmmap.datasets.drift import Drift
 from gmmap.datasets.geometry import invert, rotation_angle
 from gmmap.errors import InvalidInputError
 
@@ -95,9 +96,14 @@ class BackendOptions:
 
     @classmethod
     def for_drift(cls, drift: float) -> BackendOptions:
-        """Odometry noise scaled from one figure, the drift per metre: the default 0.02 is
-        `Drift`'s wheel odometry; motion-capture poses (TUM's ground truth) are nearer 0.002."""
-        return cls(translation=drift, rotation_per_rad=drift, rotation_per_m=drift / 4)
+        """Odometry noise of `Drift.per_metre` (drift): the default 0.02 is `Drift`'s wheel
+        odometry; motion-capture poses (TUM's ground truth) are nearer 0.002."""
+        d = Drift.per_metre(drift)
+        return cls(
+            translation=d.translation,
+            rotation_per_rad=d.rotation_per_rad,
+            rotation_per_m=d.rotation_per_m,
+        )
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():

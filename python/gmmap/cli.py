@@ -13,11 +13,32 @@ import click
 from gmmap import __version__
 
 if TYPE_CHECKING:  # the simulator is imported only by the commands that run it
-    from gmmap.sim import DepthCamera, Lidar
+    from gmmap.sim import Lidar
 
 
 def _log(msg: str) -> None:
     click.echo(msg, err=True)
+
+
+def _sensor_option(help_text: str):
+    return click.option(
+        "--sensor",
+        type=click.Choice(["lidar", "depth"]),  # gmmap.sim.ROBOT_SENSORS, kept import-free
+        default="lidar",
+        show_default=True,
+        help=help_text,
+    )
+
+
+_ODOMETRY_DRIFT = click.option(
+    "--odometry-drift",
+    default=0.02,
+    show_default=True,
+    help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
+)
+_MIN_CONFIDENCE = click.option(
+    "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
+)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -32,13 +53,7 @@ def main() -> None:
 @click.option("--seed", default=0, show_default=True, help="Sensor noise and odometry seed.")
 @click.option("--frames-per-submap", default=20, show_default=True)
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
-@click.option(
-    "--sensor",
-    type=click.Choice(["lidar", "depth"]),
-    default="lidar",
-    show_default=True,
-    help="Simulated sensor: a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
-)
+@_sensor_option("Simulated sensor: a 16-beam 360° LiDAR or a 60° depth camera (views alias).")
 @click.option("--sim-width", default=320, show_default=True, help="Depth image width (px).")
 @click.option(
     "--drift",
@@ -86,13 +101,7 @@ def demo(
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
 @click.option("--robots", default=3, show_default=True, help="--sim: robots in the simulation.")
 @click.option("--seed", default=0, show_default=True, help="--sim: noise and odometry seed.")
-@click.option(
-    "--sensor",
-    type=click.Choice(["lidar", "depth"]),
-    default="lidar",
-    show_default=True,
-    help="--sim: the sensor, a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).",
-)
+@_sensor_option("--sim: a 16-beam 360° LiDAR or a 60° depth camera (narrow views alias).")
 @click.option("--sim-width", default=640, show_default=True, help="--sim: depth image width.")
 @click.option(
     "--sim-drift", default=0.02, show_default=True, help="--sim: odometry drift per metre."
@@ -110,15 +119,8 @@ def demo(
 @click.option(
     "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
 )
-@click.option(
-    "--odometry-drift",
-    default=0.02,
-    show_default=True,
-    help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
-)
-@click.option(
-    "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
-)
+@_ODOMETRY_DRIFT
+@_MIN_CONFIDENCE
 @click.option("--linger", default=5.0, show_default=True, help="Seconds to stay after mapping.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
@@ -174,9 +176,8 @@ def robot(
         from gmmap.datasets.drift import Drift
 
         world = s.World.load(sim_world) if sim_world.endswith(".json") else s.get_world(sim_world)
-        device = _sim_sensor(sensor, sim_width)
-        drift = Drift(sim_drift, 0.0, sim_drift, sim_drift / 4, 0.0, seed)
-        run = s.simulate(world, robots, seed, device, odometry=drift)
+        device = s.robot_sensor(sensor, sim_width)
+        run = s.simulate(world, robots, seed, device, odometry=Drift.per_metre(sim_drift, seed))
         if not 0 <= sim_index < len(run):
             raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
         frames = run[sim_index]
@@ -328,7 +329,7 @@ def sim(
     if sensor == "lidar":
         device = _lidar(beams, lidar_range, noise)
     else:
-        device = _depth_camera(width, height, noise)
+        device = s.DepthCamera.scaled(width, height, noise)
     drift = Drift(
         translation=drift_translation, rotation_per_m=drift_rotation, rotation_per_rad=drift_turn
     )
@@ -347,28 +348,6 @@ def sim(
     else:
         for r in meta["robots"]:
             click.echo(f"{r['name']}: {r['frames']} frames → {out / r['name']}")
-
-
-def _depth_camera(width: int, height: int, noise: bool) -> DepthCamera:
-    """The default camera's field of view at another resolution."""
-    from gmmap.sim import DepthCamera
-
-    return DepthCamera(
-        width=width,
-        height=height,
-        fx=525.0 * width / 640,
-        fy=525.0 * height / 480,
-        cx=(width - 1) / 2,
-        cy=(height - 1) / 2,
-        noise=noise,
-    )
-
-
-def _sim_sensor(kind: str, width: int) -> DepthCamera | Lidar:
-    """The robots' simulated sensor: the default LiDAR, or the depth camera at ``width`` px."""
-    from gmmap.sim import Lidar
-
-    return Lidar() if kind == "lidar" else _depth_camera(width, width * 3 // 4, True)
 
 
 def _lidar(beams: int, max_range: float, noise: bool) -> Lidar:
@@ -514,21 +493,14 @@ def _slice(text: str) -> slice:
 )
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
 @click.option("--top-k", default=5, show_default=True, help="Candidates verified per submap.")
-@click.option(
-    "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
-)
+@_MIN_CONFIDENCE
 @click.option(
     "--wrong-matches",
     default=0.0,
     show_default=True,
     help="Robustness test: replace this fraction of verified matches by wrong ones.",
 )
-@click.option(
-    "--odometry-drift",
-    default=0.02,
-    show_default=True,
-    help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
-)
+@_ODOMETRY_DRIFT
 @click.option("--seed", default=0, show_default=True, help="Seeds --wrong-matches.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidence: float,
@@ -732,13 +704,7 @@ def eval_registration(
 )
 @click.option("--sim", "world", help="A simulator world (default: office, unless --data).")
 @click.option("--robots", default=3, show_default=True, help="Simulated robots.")
-@click.option(
-    "--sensor",
-    type=click.Choice(["lidar", "depth"]),
-    default="lidar",
-    show_default=True,
-    help="--sim: the robots' sensor.",
-)
+@_sensor_option("--sim: the robots' sensor.")
 @click.option("--frames-per-submap", default=20, show_default=True)
 @click.option(
     "--covariance", type=click.Choice(["diag", "full"]), default="full", show_default=True

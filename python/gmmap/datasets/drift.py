@@ -48,6 +48,12 @@ class Drift:
             if name != "seed" and not (math.isfinite(value) and value >= 0):
                 raise InvalidInputError(f"Drift.{name} must be finite and >= 0, got {value}")
 
+    @classmethod
+    def per_metre(cls, drift: float, seed: int = 0) -> Drift:
+        """The defaults' shape scaled by one figure: ``drift`` of the distance per axis and rad
+        per radian turned, a quarter of it in rad per metre (0.02 gives the defaults)."""
+        return cls(drift, 0.0, drift, drift / 4, 0.0, seed)
+
     def __call__(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         return apply_drift(poses, self, rng)
 

@@ -259,11 +259,9 @@ def sim_place_set(
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
     "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
     from gmmap.datasets.drift import Drift
-    from gmmap.sim import DepthCamera, Lidar, get_world, simulate
+    from gmmap.sim import get_world, robot_sensor, simulate
 
-    if sensor not in ("lidar", "depth"):
-        raise ValueError(f"sensor must be 'lidar' or 'depth', got {sensor!r}")
-    device = Lidar() if sensor == "lidar" else DepthCamera()
+    device = robot_sensor(sensor)
     run = simulate(
         get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed)
     )

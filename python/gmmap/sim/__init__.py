@@ -2,11 +2,12 @@
 
 from gmmap.sim.robots import Motion, route_poses
 from gmmap.sim.run import SimRobot, simulate, write_pointfiles, write_run, write_tum
-from gmmap.sim.sensors import DepthCamera, Lidar
+from gmmap.sim.sensors import ROBOT_SENSORS, DepthCamera, Lidar, robot_sensor
 from gmmap.sim.world import Box, Cylinder, World
 from gmmap.sim.worlds import WORLDS, get_world
 
 __all__ = [
+    "ROBOT_SENSORS",
     "WORLDS",
     "Box",
     "Cylinder",
@@ -16,6 +17,7 @@ __all__ = [
     "SimRobot",
     "World",
     "get_world",
+    "robot_sensor",
     "route_poses",
     "simulate",
     "write_pointfiles",

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmmap.datasets.tum import Intrinsics
+from gmmap.errors import InvalidInputError
 from gmmap.sim.world import World
 
 # Body frame: x forward, y left, z up. Camera frame: z forward, x right, y down.
@@ -33,6 +34,20 @@ class DepthCamera:
     depth_factor: float = 5000.0
     noise: bool = True
     mount_height: float = 1.0  # above the floor
+
+    @classmethod
+    def scaled(cls, width: int, height: int, noise: bool = True) -> DepthCamera:
+        """The default camera's field of view at another resolution."""
+        d = cls()
+        return cls(
+            width=width,
+            height=height,
+            fx=d.fx * width / d.width,
+            fy=d.fy * height / d.height,
+            cx=(width - 1) / 2,
+            cy=(height - 1) / 2,
+            noise=noise,
+        )
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -102,3 +117,14 @@ class Lidar:
         r = r[hit] + self.noise_std * rng.standard_normal(int(hit.sum()))
         keep = (r > self.min_range) & (r < self.max_range)
         return (dirs[hit][keep] * r[keep, None]).astype(np.float32)
+
+
+ROBOT_SENSORS = ("lidar", "depth")
+
+
+def robot_sensor(kind: str, width: int = 640) -> DepthCamera | Lidar:
+    """A simulated robot's sensor by name: the default LiDAR, or the default depth camera at
+    ``width`` px (4:3)."""
+    if kind not in ROBOT_SENSORS:
+        raise InvalidInputError(f"sensor must be one of {ROBOT_SENSORS}, got {kind!r}")
+    return Lidar() if kind == "lidar" else DepthCamera.scaled(width, width * 3 // 4)
