@@ -78,8 +78,9 @@ MessageCallback = Callable[[str, str, int, bytes], None]
 PeerCallback = Callable[[str], None]
 """``callback(robot)`` when a robot of the fleet joins or leaves."""
 FetchProvider = Callable[[str, str, int], Iterable[tuple[int, bytes]]]
-Roster = Callable[[], Iterable[str]]
 """``provider(robot, kind, since_seq)`` → the held ``(seq, payload)`` pairs with seq ≥ since_seq."""
+Roster = Callable[[], Iterable[str]]
+"""``roster()`` → the robots whose messages are held."""
 
 
 class TransportError(GmmapError):
@@ -575,8 +576,10 @@ class Transport:
         with ``roster()`` (the robots held), `fetch_unknown` queries. It runs on the
         transport's query thread. Calling again replaces both."""
         self._check_open()
-        if not callable(provider) or (roster is not None and not callable(roster)):
+        if not callable(provider):
             raise TransportConfigError(f"provider must be callable; got {provider!r}")
+        if roster is not None and not callable(roster):
+            raise TransportConfigError(f"roster must be callable; got {roster!r}")
         with self._lock:
             self._provider, self._roster = provider, roster
         with self._declare_lock:
@@ -730,17 +733,16 @@ def _parse_fetch(key: str, since: str | None) -> tuple[str, str, str, int] | Non
     """``(fleet, robot, kind, since)`` of a fetch query ``gmmap/<fleet>/<robot>/<kind>/*``;
     robot ``*`` for `fetch_unknown`."""
     parts = key.split("/")
-    if len(parts) == 5 and parts[2] == "*":
-        key = "/".join([*parts[:2], "x", *parts[3:]])  # a valid name stands in for the check
-    parsed = parse_data_key(key.removesuffix("/*") + "/0") if key.endswith("/*") else None
-    if parsed is not None and len(parts) == 5 and parts[2] == "*":
-        parsed = (parsed[0], "*", parsed[2], parsed[3])
-    if parsed is None:
+    if len(parts) != 5 or parts[0] != PREFIX or parts[4] != "*":
+        return None
+    _, fleet, robot, kind, _ = parts
+    names = (fleet, kind) if robot == "*" else (fleet, robot, kind)
+    if not all(_NAME_RE.fullmatch(name) for name in names):
         return None
     since_text = "0" if since is None else since
     if not since_text.isdigit():
         return None
-    return parsed[0], parsed[1], parsed[2], int(since_text)
+    return fleet, robot, kind, int(since_text)
 
 
 def _as_bytes(payload: object) -> bytes:
