@@ -571,13 +571,10 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
             f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
             f"{report['ate_after_m']:.3f} m after optimisation"
         )
-    m = report.get("match_errors", {})
-    if m.get("n"):
-        from gmmap.eval.registration import describe_errors
+    from gmmap.eval.registration import describe_match_errors
 
-        click.echo(f"kept matches vs truth: {describe_errors(m)}")
-        if m["optimised"].get("n"):
-            click.echo(f"  the same, optimised: {describe_errors(m['optimised'])}")
+    for line in describe_match_errors(report.get("match_errors", {})):
+        click.echo(line)
     if "injected_wrong" in report:
         w = report["injected_wrong"]
         click.echo(f"injected wrong matches: {w['rejected']} of {w['n']} rejected")

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.datasets.geometry import invert
-from gmmap.eval.registration import describe_errors, error_summary, pose_errors
+from gmmap.eval.registration import describe_match_errors, error_summary, pose_errors
 from gmmap.transport import free_port
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
@@ -237,11 +237,8 @@ def format_report(r: dict) -> str:
             f"matches         {n}: {m['accepted']} of {m['accepted'] + m['rejected']} over "
             f"C_thr, {m['backend_accepted']} kept by PCM/GNC; {r['received'][n]} submaps received"
         )
-    m = r.get("match_errors", {})
-    if m.get("n"):
-        lines.append(f"where they met  {m['n']} kept registrations vs truth: {describe_errors(m)}")
-        if m["optimised"].get("n"):
-            lines.append(f"                the same, optimised: {describe_errors(m['optimised'])}")
+    for i, line in enumerate(describe_match_errors(r.get("match_errors", {}))):
+        lines.append(f"{'where they met' if i == 0 else '':<16}{line}")
     lines.append(f"map             {r.get('map_png')}")
     if r.get("map_rrd"):
         lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")

@@ -73,6 +73,17 @@ def describe_errors(summary: dict) -> str:
     )
 
 
+def describe_match_errors(errors: dict) -> list[str]:
+    """Lines for kept matches against the truth (``match_errors`` of a merge or demo report:
+    an `error_summary` with an ``optimised`` one inside); none when nothing was kept."""
+    if not errors.get("n"):
+        return []
+    lines = [f"{errors['n']} kept matches vs truth: {describe_errors(errors)}"]
+    if errors["optimised"].get("n"):
+        lines.append(f"the same, optimised: {describe_errors(errors['optimised'])}")
+    return lines
+
+
 def random_perturbation(rng: np.random.Generator) -> np.ndarray:
     """A yaw uniform in ±(0–180°) and a translation uniform in the 1 m ball."""
     yaw = rng.uniform(0, math.pi) * rng.choice([-1, 1])
