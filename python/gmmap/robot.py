@@ -325,8 +325,9 @@ class RobotNode:
                 return
             # What arrived counts, stored or still queued: asking again for submaps waiting in
             # the inbox of a busy robot would have them sent twice.
+            stored = set(self.store.seqs(r))  # read outside the lock the receivers take
             with self._lock:
-                have = set(self._arrived.get(r, ())) | set(self.store.seqs(r))
+                have = stored | self._arrived.get(r, set())
             gaps = [seq for seq in range(max(have) + 1) if seq not in have] if have else []
             since = gaps[0] if gaps else (max(have) + 1 if have else 0)
             for seq, payload in self.transport.fetch(r, KIND, since):
