@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import ndtr
@@ -154,7 +154,6 @@ class PlanResult:
     steps: int
     time_per_step_s: float
     reason: str = ""
-    occupancy: list[float] = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -207,7 +206,7 @@ class GradientPlanner:
         opt = self.options
         position = _as_xy(start)[0].copy()
         goal_xy = _as_xy(goal)[0]
-        path, occ = [position.copy()], []
+        path = [position.copy()]
         best, since_best = math.inf, 0
         status, reason = "stuck", f"no arrival within {opt.max_steps} steps"
         t0 = time.perf_counter()
@@ -229,10 +228,9 @@ class GradientPlanner:
                 break
             position = position + min(opt.step, dist) * direction
             path.append(position.copy())
-            occ.append(float(self.field.occupancy(position)[0]))
         steps = len(path) - 1
         elapsed = time.perf_counter() - t0
-        return PlanResult(np.array(path), status, steps, elapsed / max(steps, 1), reason, occ)
+        return PlanResult(np.array(path), status, steps, elapsed / max(steps, 1), reason)
 
 
 def plan(
