@@ -58,9 +58,9 @@ def main() -> None:
                 "max_rss_mb": per_robot({k: v and v["max_rss_mb"] for k, v in res.items()}),
                 "groups": r["groups"],
                 "kept_matches_vs_truth": r["match_errors"],
-                "frames_vs_truth_max": {
-                    "t": max((p["t_error"] or 0.0) for p in r["pairs"]),
-                    "r_deg": max((p["r_error_deg"] or 0.0) for p in r["pairs"]),
+                "pairs_vs_truth_max": {
+                    key: max((p[key] or 0.0) for p in r["pairs"])
+                    for key in ("t_error", "r_error_deg", "frame_t_error", "frame_r_error_deg")
                 },
             }
         )

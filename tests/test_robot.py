@@ -192,9 +192,11 @@ def test_demo_runs_two_robot_processes(tmp_path):
     assert set(r["bytes_per_submap"]) >= {"wire", "points_float32", "gmm_float32_plus_descriptor"}
     assert 0 < r["bytes_per_submap"]["wire"] <= 1024 and r["reduction_vs_points"] > 1
     assert {"a", "b", "t_error", "r_error_deg"} <= set(r["pairs"][0])
-    # The robots meet in room B: one group, and the registrations the backend kept are right.
-    # (The map frames' error also holds the odometry drift between start and meeting place.)
+    # The robots meet in room B: one group, and their relative pose there is right. The map
+    # frames' error also holds the odometry drift between the starts and the meeting place.
     assert r["groups"] == [["robot_0", "robot_1"]]
     m = r["match_errors"]
     assert m["n"] >= 3 and m["t_median"] < 0.05 and m["r_median_deg"] < 1.0
-    assert r["pairs"][0]["t_error"] < 1.0 and r["pairs"][0]["r_error_deg"] < 5.0
+    (pair,) = r["pairs"]
+    assert pair["matches"] >= 3 and pair["t_error"] < 0.05 and pair["r_error_deg"] < 1.0
+    assert pair["frame_t_error"] < 1.0 and pair["frame_r_error_deg"] < 5.0

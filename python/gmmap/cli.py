@@ -562,10 +562,10 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
             f"{r['name']:>12} → {r['reference']:<12} t = {np.round(t[:3, 3], 3).tolist()} m, "
             f"yaw {yaw:.2f}°, {r['submaps']} submaps"
         )
+    from gmmap.eval.pairs import describe_pair
+
     for p in report.get("pairs", []):
-        click.echo(
-            f"error {p['b']} vs {p['a']}: {p['t_error'] * 100:.1f} cm, {p['r_error_deg']:.2f}°"
-        )
+        click.echo(f"error {describe_pair(p)}")
     if "ate_before_m" in report:
         click.echo(
             f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "

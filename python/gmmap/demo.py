@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.datasets.geometry import invert
+from gmmap.eval.pairs import describe_pair, pair_errors
 from gmmap.eval.registration import describe_match_errors, error_summary, pose_errors
 from gmmap.transport import free_port
 
@@ -128,19 +129,9 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
     view = max(sorted(reports), key=lambda n: sum(reports[n]["held"].values()))
     v = reports[view]
     groups = v["groups"]
-    pairs = []
-    for name in sorted(reports):
-        ref = v["reference"].get(name, name)
-        if name == ref:
-            continue
-        est = np.array(v["to_reference"][name])
-        t, deg = pose_errors(est, invert(truth[ref]) @ truth[name])
-        pairs.append({"a": ref, "b": name, "t_error": t, "r_error_deg": deg})
-    grouped = {r for g in groups for r in g if len(g) > 1}
-    reference = min(reports)
-    for name in sorted(reports):
-        if name not in grouped and name != reference:
-            pairs.append({"a": reference, "b": name, "t_error": None, "r_error_deg": None})
+    truth_anchors, poses, kept = _anchors(reports, view)
+    to_reference = {n: np.array(T) for n, T in v["to_reference"].items()}
+    pairs = pair_errors(groups, reports, poses, truth_anchors, kept, to_reference, truth)
     subs = [s for r in reports.values() for s in r["submaps"] if s["points_float32"]]
     wire = float(np.mean([s["wire"] for s in subs]))
     points = float(np.mean([s["points_float32"] for s in subs]))
@@ -172,7 +163,7 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
-        "match_errors": match_errors(reports, view),
+        "match_errors": match_errors(reports, truth_anchors, poses, kept),
     }
 
 
@@ -184,10 +175,8 @@ def _totals(reports: dict[str, dict], direction: str) -> dict:
     }
 
 
-def match_errors(reports: dict[str, dict], view: str) -> dict:
-    """Where robots met, against the ground truth of the two anchors (free of the drift the
-    frames' errors carry): each registration a backend kept (every robot's, each pair once)
-    as registered, and those of ``view``'s pose graph as optimised there."""
+def _anchors(reports: dict[str, dict], view: str):
+    """True anchors (every robot's own), ``view``'s optimised poses and its kept match nodes."""
     truth = {
         (name, int(seq)): np.array(T)
         for name, r in reports.items()
@@ -195,22 +184,29 @@ def match_errors(reports: dict[str, dict], view: str) -> dict:
     }
     poses = {(k.rsplit("/", 1)[0], int(k.rsplit("/", 1)[1])): np.array(P)
              for k, P in reports[view]["poses"].items()}  # fmt: skip
+    kept = [(tuple(e["target"]), tuple(e["source"])) for e in _kept(reports[view])]
+    return truth, poses, kept
 
-    def kept(r: dict):
-        for e in r.get("edges", []):
-            target, source = tuple(e["target"]), tuple(e["source"])
-            if e.get("backend") == "accepted" and target in truth and source in truth:
-                yield target, source, np.array(e["transform"])
 
+def _kept(report: dict):
+    return (e for e in report.get("edges", []) if e.get("backend") == "accepted")
+
+
+def match_errors(reports: dict[str, dict], truth: dict, poses: dict, kept: list) -> dict:
+    """Where robots met, against the ground truth of the two anchors (free of the drift the
+    frames' errors carry): each registration a backend kept (every robot's, each pair once)
+    as registered, and ``kept`` (the view's) as optimised in the view's pose graph."""
     registered = {
-        frozenset({t, s}): pose_errors(T, invert(truth[t]) @ truth[s])
+        frozenset({t, s}): pose_errors(np.array(e["transform"]), invert(truth[t]) @ truth[s])
         for r in reports.values()
-        for t, s, T in kept(r)
+        for e in _kept(r)
+        for t, s in [(tuple(e["target"]), tuple(e["source"]))]
+        if t in truth and s in truth
     }
     optimised = [
         pose_errors(invert(poses[t]) @ poses[s], invert(truth[t]) @ truth[s])
-        for t, s, _ in kept(reports[view])
-        if t in poses and s in poses
+        for t, s in kept
+        if t in poses and s in poses and t in truth and s in truth
     ]
     return {**error_summary(list(registered.values())), "optimised": error_summary(optimised)}
 
@@ -226,12 +222,7 @@ def format_report(r: dict) -> str:
         f"{r['reduction_vs_gmm_float32_plus_descriptor']:.1f}x vs GMM + descriptor",
     ]
     for p in r["pairs"]:
-        err = (
-            "not connected"
-            if p["t_error"] is None
-            else f"{p['t_error']:.3f} m, {p['r_error_deg']:.2f}°"
-        )
-        lines.append(f"pair            {p['a']} ← {p['b']}: {err} (vs ground truth)")
+        lines.append(f"pair            {describe_pair(p)}")
     for n, m in r["matches"].items():
         lines.append(
             f"matches         {n}: {m['accepted']} of {m['accepted'] + m['rejected']} over "

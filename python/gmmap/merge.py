@@ -18,6 +18,7 @@ import numpy as np
 from gmmap.backend import BackendOptions, BackendResult, PoseGraph
 from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
+from gmmap.eval.pairs import pair_errors
 from gmmap.eval.registration import error_summary, pose_errors
 from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.place import Match, PlaceDatabase, PlaceOptions
@@ -198,25 +199,22 @@ def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
 
 
 def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> dict:
-    """Errors of every robot's recovered frame relative to its reference, and the ATE (evo)
-    of the anchors in the reference frame before (odometry placed by the recovered frames)
-    and after optimisation."""
+    """Every robot pair's relative pose errors (`gmmap.eval.pairs`: where they met, and their
+    map frames), and the ATE (evo) of the anchors in the reference frame before (odometry
+    placed by the recovered frames) and after optimisation."""
     frames = {r: map_to_world(subs) for r, subs in submaps.items()}
-    pairs, before, after, truth = [], [], [], []
+    truth = {(r, s.seq): s.gt_anchor for r, subs in submaps.items() for s in subs}
+    kept = [b.edges[e] for e in b.accepted]
+    before, after, true = [], [], []
     for r, subs in sorted(submaps.items()):
-        ref = b.reference[r]
-        to_ref_true = invert(frames[ref]) @ frames[r]
-        if r != ref:
-            t, deg = pose_errors(b.to_reference[r], to_ref_true)
-            pairs.append({"a": ref, "b": r, "t_error": t, "r_error_deg": deg})
         for s in subs:
             before.append(b.to_reference[r] @ s.anchor)
             after.append(b.poses[(r, s.seq)])
-            truth.append(invert(frames[ref]) @ s.gt_anchor)
+            true.append(invert(frames[b.reference[r]]) @ s.gt_anchor)
     return {
-        "pairs": pairs,
-        "ate_before_m": ate(np.array(before), np.array(truth)),
-        "ate_after_m": ate(np.array(after), np.array(truth)),
+        "pairs": pair_errors(b.groups, submaps, b.poses, truth, kept, b.to_reference, frames),
+        "ate_before_m": ate(np.array(before), np.array(true)),
+        "ate_after_m": ate(np.array(after), np.array(true)),
     }
 
 
