@@ -2,11 +2,12 @@
 
 Prints one JSON object. For each fleet size the whole demo runs (``gmmap.demo.run_demo``:
 simulated robots in the office world as separate ``gmmap robot`` processes on loopback Zenoh,
-320-px depth camera, 20 frames per submap). Per robot: payload bytes sent and received, the
+16-beam LiDAR, 20 frames per submap). Per robot: payload bytes sent and received, the
 bytes a point-cloud system would send for the same submaps (voxelised points as float32, the
 baseline of the paper's Fig. 9), CPU seconds (user + system) and peak resident memory, read by
-each robot process from getrusage at its end; and how right the kept registrations and the
-robots' frames are. Robots beyond the office's five routes drive them in reverse.
+each robot process from getrusage at its end; and how right the kept registrations, the
+robot pairs where they met and their map frames are. Robots beyond the office's five routes
+drive them in reverse.
 
     .venv/bin/python benchmarks/fleet.py [--robots 2,4,6,8] [--max-frames N]
 """
