@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,16 @@ def test_confidence_is_one_for_itself_and_falls_with_misalignment(scene):
     assert confidence(scene, scene) == pytest.approx(1.0, abs=1e-12)
     values = [confidence(scene, scene, rigid(0.0, [d, 0, 0])) for d in (0.02, 0.05, 0.1, 0.2)]
     assert all(a > b for a, b in zip([1.0, *values], values, strict=False))
+
+
+def test_the_returned_basin_is_the_better_refined_one():
+    """Two simulated LiDAR submaps (tests/data/basin_*.npz) whose yaw start ranked first at
+    the coarse scale refines to C 0.17 and the runner-up to 0.34: the better one is returned,
+    the other is the alternative."""
+    data = Path(__file__).parent / "data"
+    source, target = (Gmm.load(data / f"basin_{k}.npz") for k in ("source", "target"))
+    r = register(source, target)
+    assert r.confidence > 0.3 and r.alternative_confidence < r.confidence
 
 
 def test_confidence_does_not_depend_on_component_count(slice_points):

@@ -566,7 +566,7 @@ pub fn register(
             std::iter::once(best).chain(runner).collect()
         }
     };
-    let (pose, fin, it) = problem.refine(starts[0], opts);
+    let (mut pose, mut fin, it) = problem.refine(starts[0], opts);
     iterations += it;
     let c2 = opts.confidence_scale * opts.confidence_scale;
     // ∫f², ∫g² and ∫T(f)g, all widened by c2 and pruned alike (evaluate adds c2 to each side).
@@ -577,18 +577,20 @@ pub fn register(
     };
     let norm = (self_overlap(source) * self_overlap(target)).sqrt();
     let confidence_at = |p: &Pose| (problem.evaluate(p, c2, false).f / norm).clamp(0.0, 1.0);
-    let alternative = match starts.get(1) {
-        Some(start) => {
-            let (other, _, it) = problem.refine(*start, opts);
-            iterations += it;
-            if distinct(&other, &pose) {
-                confidence_at(&other)
-            } else {
-                0.0
+    let mut confidence = confidence_at(&pose);
+    let mut alternative = 0.0;
+    if let Some(start) = starts.get(1) {
+        let (other, other_fin, it) = problem.refine(*start, opts);
+        iterations += it;
+        if distinct(&other, &pose) {
+            alternative = confidence_at(&other);
+            // The coarse scale only ranks the starts; the finer scales can reverse the order.
+            if alternative > confidence {
+                (pose, fin) = (other, other_fin);
+                std::mem::swap(&mut confidence, &mut alternative);
             }
         }
-        None => 0.0,
-    };
+    }
     let mut h = fin.h;
     symmetrise(&mut h);
     let scale = if fin.f > 0.0 {
@@ -598,7 +600,7 @@ pub fn register(
     };
     Ok(Registration {
         transform: pose,
-        confidence: confidence_at(&pose),
+        confidence,
         information: h.map(|r| r.map(|v| v * scale)),
         iterations,
         alternative,
