@@ -11,7 +11,8 @@
 //! Coarse to fine: an isotropic variance s² is added to every covariance of both mixtures, for
 //! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
 //! `yaw_starts` rotations about +z (gravity) with the centroids aligned are tried at the coarsest
-//! scale and the best is refined. C at the end (measured with `confidence_scale` added to all
+//! scale, the best two distinct ones are refined, and the one with the higher C is returned (the
+//! other's C is the `alternative`). C at the end (measured with `confidence_scale` added to all
 //! covariances) is the geometric confidence; H (scaled) is the information matrix.
 
 use crate::fastmath::exp_nonpos;
