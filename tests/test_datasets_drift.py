@@ -62,6 +62,20 @@ def test_rotation_noise_follows_the_angle_turned():
     assert 1e-3 < err < 0.2
 
 
+def test_gravity_referenced_drift_keeps_roll_and_pitch():
+    # A camera (z forward, y down: tilted against the world's +z) driving and turning.
+    camera = so3_exp(np.array([-np.pi / 2, 0.0, 0.0]))
+    truth = turning_in_place(60) @ straight_line(60)
+    truth[:, :3, :3] = truth[:, :3, :3] @ camera
+    up = (0.0, 0.0, 1.0)
+    drifted = apply_drift(truth, Drift(rotation_per_rad=0.05, rotation_per_m=0.05, seed=3, up=up))
+    seen = np.einsum("mji,j->mi", truth[:, :3, :3], up)  # the world's up in each sensor frame
+    np.testing.assert_allclose(np.einsum("mji,j->mi", drifted[:, :3, :3], up), seen, atol=1e-12)
+    assert rotation_angle((invert(truth[-1:]) @ drifted[-1:])[:, :3, :3])[0] > 1e-3  # heading
+    with pytest.raises(InvalidInputError, match="up"):
+        Drift(up=(0.0, 0.0, 0.0))
+
+
 def test_bad_parameters_and_shapes():
     with pytest.raises(InvalidInputError, match="translation"):
         Drift(translation=-0.1)

@@ -111,9 +111,10 @@ def test_merge_cli_json(tmp_path, slice_robots):
 def sim_robots():
     """Two simulated LiDAR robots in the office with drifting odometry; they meet in room B."""
     from gmmap.datasets.drift import Drift
-    from gmmap.sim import Lidar, get_world, simulate
+    from gmmap.sim import UP, Lidar, get_world, simulate
 
-    run = simulate(get_world("office"), 2, seed=0, sensor=Lidar(), odometry=Drift(seed=0))
+    drift = Drift(seed=0, up=UP)
+    run = simulate(get_world("office"), 2, seed=0, sensor=Lidar(), odometry=drift)
     options = BuildOptions(frames_per_submap=20, covariance="full")
     return {r.name: list(build_submaps(r, r.name, options)) for r in run}
 
@@ -122,8 +123,9 @@ def test_injected_wrong_matches_are_rejected_and_change_nothing(sim_robots):
     clean = merge(sim_robots).report(sim_robots)
     assert clean["groups"] == [["robot_0", "robot_1"]]
     kept = clean["match_errors"]
-    assert kept["n"] >= 5 and kept["t_median"] < 0.05 and kept["r_median_deg"] < 1.0
-    report = merge(sim_robots, MergeOptions(wrong_matches=0.2, seed=1)).report(sim_robots)
+    assert kept["n"] >= 3 and kept["t_median"] < 0.05 and kept["r_median_deg"] < 1.0
+    # Two robots verify only a handful of matches: 40 % makes two of them wrong.
+    report = merge(sim_robots, MergeOptions(wrong_matches=0.4, seed=1)).report(sim_robots)
     wrong = report["injected_wrong"]
     assert wrong["n"] >= 2 and wrong["rejected"] == wrong["n"]
     assert report["groups"] == clean["groups"]

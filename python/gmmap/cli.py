@@ -177,7 +177,8 @@ def robot(
 
         world = s.World.load(sim_world) if sim_world.endswith(".json") else s.get_world(sim_world)
         device = s.robot_sensor(sensor, sim_width)
-        run = s.simulate(world, robots, seed, device, odometry=Drift.per_metre(sim_drift, seed))
+        drift = Drift.per_metre(sim_drift, seed, s.UP)
+        run = s.simulate(world, robots, seed, device, odometry=drift)
         if not 0 <= sim_index < len(run):
             raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
         frames = run[sim_index]
@@ -331,7 +332,10 @@ def sim(
     else:
         device = s.DepthCamera.scaled(width, height, noise)
     drift = Drift(
-        translation=drift_translation, rotation_per_m=drift_rotation, rotation_per_rad=drift_turn
+        translation=drift_translation,
+        rotation_per_m=drift_rotation,
+        rotation_per_rad=drift_turn,
+        up=s.UP,
     )
     run = s.simulate(
         world, robots, seed, device, s.Motion(speed=speed, rate=rate), drift, max_frames=max_frames

@@ -259,11 +259,11 @@ def sim_place_set(
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
     "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
     from gmmap.datasets.drift import Drift
-    from gmmap.sim import get_world, robot_sensor, simulate
+    from gmmap.sim import UP, get_world, robot_sensor, simulate
 
     device = robot_sensor(sensor)
     run = simulate(
-        get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed)
+        get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed, up=UP)
     )
     submaps = []
     for r in run:

@@ -24,6 +24,9 @@ Sensor = DepthCamera | Lidar
 Progress = Callable[[int], None]
 # Stamps start at a fixed epoch so runs are reproducible byte for byte.
 EPOCH = 1_700_000_000.0
+# The worlds' vertical. Simulated robots drive on the floor with an IMU: give their `Drift` this
+# ``up`` and only heading and position drift, not roll and pitch.
+UP = (0.0, 0.0, 1.0)
 
 
 @dataclass
