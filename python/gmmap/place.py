@@ -58,12 +58,16 @@ def _unit(v: np.ndarray) -> np.ndarray:
 class ShapeDescriptor:
     """Joint histogram of (horizontal distance, |height difference|) over point pairs.
 
-    ``sample`` points (seeded) give sample·(sample−1)/2 pairs; the square root of the normalised
-    histogram makes the cosine distance a Hellinger distance. The Scan-Context grid for `yaw`:
-    ``rings`` × ``sectors`` cells out to ``max_distance``, each keeping its highest point.
+    ``pairs`` point pairs drawn independently (seeded) from all the points: the histogram's
+    noise falls as 1/sqrt(pairs) at a cost linear in it. (All pairs of a 768-point subsample,
+    as before, cost as much as 300,000 pairs but carry the noise of 768 points: recall@1 in
+    the simulated office swung by ±10 points with the subsample's seed.) The square root of
+    the normalised histogram makes the cosine distance a Hellinger distance. The Scan-Context
+    grid for `yaw`: ``rings`` × ``sectors`` cells out to ``max_distance``, each keeping its
+    highest point.
     """
 
-    sample: int = 768
+    pairs: int = 1_000_000
     distance_bins: int = 24
     max_distance: float = 8.0
     height_bins: int = 8
@@ -73,17 +77,21 @@ class ShapeDescriptor:
     seed: int = 0
 
     def describe_points(self, points: np.ndarray) -> np.ndarray:
-        p = _subsample(as_points(points, "points"), self.sample, self.seed)
-        i, j = np.triu_indices(len(p), 1)
-        horizontal = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
-        vertical = np.abs(p[i, 2] - p[j, 2])
-        hist, _, _ = np.histogram2d(
-            horizontal,
-            vertical,
-            bins=(self.distance_bins, self.height_bins),
-            range=((0, self.max_distance), (0, self.max_height)),
+        p = as_points(points, "points")
+        if len(p) < 2:
+            raise InvalidInputError(f"a descriptor needs at least 2 points, got {len(p)}")
+        rng = np.random.default_rng(self.seed)
+        i = rng.integers(0, len(p), self.pairs)
+        j = rng.integers(0, len(p) - 1, self.pairs)
+        j += j >= i  # uniform over the other points
+        d = p[i] - p[j]
+        h = (np.hypot(d[:, 0], d[:, 1]) * (self.distance_bins / self.max_distance)).astype(int)
+        v = (np.abs(d[:, 2]) * (self.height_bins / self.max_height)).astype(int)
+        keep = (h < self.distance_bins) & (v < self.height_bins)
+        hist = np.bincount(
+            h[keep] * self.height_bins + v[keep], minlength=self.distance_bins * self.height_bins
         )
-        return _unit(np.sqrt(hist.ravel()))
+        return _unit(np.sqrt(hist.astype(float)))
 
     def polar(self, points: np.ndarray) -> np.ndarray:
         """The Scan-Context grid around the centroid: highest point above the lowest per cell."""
@@ -108,14 +116,6 @@ class ShapeDescriptor:
         shift = int(np.argmax(corr.sum(axis=0)))
         yaw = shift * 2 * math.pi / self.sectors
         return (yaw + math.pi) % (2 * math.pi) - math.pi
-
-
-def _subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
-    if len(points) < 2:
-        raise InvalidInputError(f"a descriptor needs at least 2 points, got {len(points)}")
-    if len(points) <= n:
-        return points
-    return points[np.random.default_rng(seed).choice(len(points), n, replace=False)]
 
 
 @dataclass(frozen=True)
