@@ -32,6 +32,7 @@ from gmmap.points import as_points
 from gmmap.register import Registration, register
 
 RESAMPLE_POINTS = 4096  # as PointNetVLAD's input
+PAIR_CHUNK = 1 << 17
 
 
 def resample(gmm: Gmm, n: int = RESAMPLE_POINTS, seed: int = 0) -> np.ndarray:
@@ -81,17 +82,18 @@ class ShapeDescriptor:
         if len(p) < 2:
             raise InvalidInputError(f"a descriptor needs at least 2 points, got {len(p)}")
         rng = np.random.default_rng(self.seed)
-        i = rng.integers(0, len(p), self.pairs)
-        j = rng.integers(0, len(p) - 1, self.pairs)
-        j += j >= i  # uniform over the other points
-        d = p[i] - p[j]
-        h = (np.hypot(d[:, 0], d[:, 1]) * (self.distance_bins / self.max_distance)).astype(int)
-        v = (np.abs(d[:, 2]) * (self.height_bins / self.max_height)).astype(int)
-        keep = (h < self.distance_bins) & (v < self.height_bins)
-        hist = np.bincount(
-            h[keep] * self.height_bins + v[keep], minlength=self.distance_bins * self.height_bins
-        )
-        return _unit(np.sqrt(hist.astype(float)))
+        hist = np.zeros(self.distance_bins * self.height_bins)
+        for start in range(0, self.pairs, PAIR_CHUNK):  # chunks keep the memory at a few MB
+            n = min(PAIR_CHUNK, self.pairs - start)
+            i = rng.integers(0, len(p), n)
+            j = rng.integers(0, len(p) - 1, n)
+            j += j >= i  # uniform over the other points
+            d = p[i] - p[j]
+            h = (np.hypot(d[:, 0], d[:, 1]) * (self.distance_bins / self.max_distance)).astype(int)
+            v = (np.abs(d[:, 2]) * (self.height_bins / self.max_height)).astype(int)
+            keep = (h < self.distance_bins) & (v < self.height_bins)
+            hist += np.bincount(h[keep] * self.height_bins + v[keep], minlength=len(hist))
+        return _unit(np.sqrt(hist))
 
     def polar(self, points: np.ndarray) -> np.ndarray:
         """The Scan-Context grid around the centroid: highest point above the lowest per cell."""
