@@ -123,6 +123,8 @@ def test_bad_input_is_rejected(small_gmm):
     with pytest.raises(InvalidInputError):
         ShapeDescriptor().describe_points(np.full((10, 3), np.nan))
     with pytest.raises(InvalidInputError):
+        ShapeDescriptor(pairs=0)
+    with pytest.raises(InvalidInputError):
         PlaceOptions(min_confidence=2.0)
     with pytest.raises(InvalidInputError):
         PlaceDatabase().add("a", 0, None)

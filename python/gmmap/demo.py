@@ -196,13 +196,13 @@ def match_errors(reports: dict[str, dict], truth: dict, poses: dict, kept: list)
     """Where robots met, against the ground truth of the two anchors (free of the drift the
     frames' errors carry): each registration a backend kept (every robot's, each pair once)
     as registered, and ``kept`` (the view's) as optimised in the view's pose graph."""
-    registered = {
-        frozenset({t, s}): pose_errors(np.array(e["transform"]), invert(truth[t]) @ truth[s])
-        for r in reports.values()
-        for e in _kept(r)
-        for t, s in [(tuple(e["target"]), tuple(e["source"]))]
-        if t in truth and s in truth
-    }
+    registered = {}
+    for r in reports.values():
+        for e in _kept(r):
+            t, s = tuple(e["target"]), tuple(e["source"])
+            if t in truth and s in truth:
+                truth_ts = invert(truth[t]) @ truth[s]
+                registered[frozenset({t, s})] = pose_errors(np.array(e["transform"]), truth_ts)
     optimised = [
         pose_errors(invert(poses[t]) @ poses[s], invert(truth[t]) @ truth[s])
         for t, s in kept

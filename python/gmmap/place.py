@@ -77,6 +77,14 @@ class ShapeDescriptor:
     sectors: int = 60
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        counts = (self.pairs, self.distance_bins, self.height_bins, self.rings, self.sectors)
+        if min(counts) < 1 or not (self.max_distance > 0 and self.max_height > 0):
+            raise InvalidInputError(
+                "ShapeDescriptor needs pairs, bins, rings, sectors >= 1 and "
+                "positive max_distance and max_height"
+            )
+
     def describe_points(self, points: np.ndarray) -> np.ndarray:
         p = as_points(points, "points")
         if len(p) < 2:
