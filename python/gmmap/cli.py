@@ -288,13 +288,13 @@ class _Frames:
     "--drift-rotation",
     default=0.005,
     show_default=True,
-    help="Odometry rotation noise per axis, radians per metre driven.",
+    help="Odometry heading noise, radians per metre driven.",
 )
 @click.option(
     "--drift-turn",
     default=0.02,
     show_default=True,
-    help="Odometry rotation noise per axis, radians per radian turned.",
+    help="Odometry heading noise, radians per radian turned.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the run's metadata as JSON.")
 def sim(
@@ -320,8 +320,9 @@ def sim(
 
     Each robot's folder reads back with `gmmap.datasets.open` (and `gmmap info`): depth PNGs in
     a TUM RGB-D folder, or one PLY per LiDAR scan with poses.txt; ground truth in the world
-    frame, odometry (with the drift model of gmmap.datasets.drift) in the robot's own map
-    frame. sim.json holds each robot's map→world transform, which the robots never see.
+    frame, odometry (with the drift model of gmmap.datasets.drift, gravity-referenced: heading
+    and position drift, roll and pitch do not) in the robot's own map frame. sim.json holds
+    each robot's map→world transform, which the robots never see.
     """
     from gmmap import sim as s
     from gmmap.datasets.drift import Drift
