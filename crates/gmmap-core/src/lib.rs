@@ -9,6 +9,7 @@ mod fastmath;
 pub mod gmm;
 mod init;
 pub mod linalg;
+pub mod place;
 pub mod raycast;
 pub mod register;
 pub mod rng;

@@ -2,6 +2,7 @@
 //! Argument checking with friendly messages lives in the Python layer; errors that reach this
 //! far become `ValueError`.
 
+use gmmap_core::place::{pair_histogram as pair_histogram_core, PairHistogram};
 use gmmap_core::raycast::{Pinhole, Scene, Shape};
 use gmmap_core::register::{register, Pose, RegisterOptions};
 use gmmap_core::select::{select, SelectOptions};
@@ -180,6 +181,32 @@ fn voxel_filter<'py>(
     let pts = points_of(&points)?;
     let out = in_pool(py, || gmmap_core::voxel_filter(&pts, voxel_size)).map_err(value_error)?;
     to_array2(py, &out)
+}
+
+/// Pair histogram of the place descriptor (see gmmap_core::place), flat, distance-major.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn pair_histogram<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    pairs: usize,
+    distance_bins: usize,
+    max_distance: f64,
+    height_bins: usize,
+    max_height: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let pts = points_of(&points)?;
+    let o = PairHistogram {
+        pairs,
+        distance_bins,
+        max_distance,
+        height_bins,
+        max_height,
+        seed,
+    };
+    let h = in_pool(py, || pair_histogram_core(&pts, &o)).map_err(value_error)?;
+    Ok(PyArray1::from_vec(py, h))
 }
 
 /// Model selection: (weights, means, covariances, labels).
@@ -420,5 +447,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(select_components, m)?)?;
     m.add_function(wrap_pyfunction!(l2_inner, m)?)?;
     m.add_function(wrap_pyfunction!(register_gmm, m)?)?;
+    m.add_function(wrap_pyfunction!(pair_histogram, m)?)?;
     Ok(())
 }
