@@ -574,7 +574,8 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
     if "ate_before_m" in report:
         click.echo(
             f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
-            f"{report['ate_after_m']:.3f} m after optimisation"
+            f"{report['ate_after_m']:.3f} m after optimisation; rigidly aligned "
+            f"{report['ate_aligned_before_m']:.3f} m and {report['ate_aligned_after_m']:.3f} m"
         )
     from gmmap.eval.registration import describe_match_errors
 

@@ -200,8 +200,8 @@ def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
 
 def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> dict:
     """Every robot pair's relative pose errors (`gmmap.eval.pairs`: where they met, and their
-    map frames), and the ATE (evo) of the anchors in the reference frame before (odometry
-    placed by the recovered frames) and after optimisation."""
+    map frames), and the ATE (evo) of the anchors in the reference frame, as they are and
+    rigidly aligned, before (odometry placed by the recovered frames) and after optimisation."""
     frames = {r: map_to_world(subs) for r, subs in submaps.items()}
     truth = {(r, s.seq): s.gt_anchor for r, subs in submaps.items() for s in subs}
     kept = [b.edges[e] for e in b.accepted]
@@ -215,15 +215,21 @@ def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> d
         "pairs": pair_errors(b.groups, submaps, b.poses, truth, kept, b.to_reference, frames),
         "ate_before_m": ate(np.array(before), np.array(true)),
         "ate_after_m": ate(np.array(after), np.array(true)),
+        "ate_aligned_before_m": ate(np.array(before), np.array(true), align=True),
+        "ate_aligned_after_m": ate(np.array(after), np.array(true), align=True),
     }
 
 
-def ate(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """RMSE of anchor positions (evo's APE, translation part), without re-alignment: both are
-    already in the reference frame."""
+def ate(estimate: np.ndarray, truth: np.ndarray, align: bool = False) -> float:
+    """RMSE of anchor positions (evo's APE, translation part). Both are in the reference frame;
+    ``align`` first fits the estimate to the truth by one rigid motion (evo's ``--align``), which
+    takes out where the reference robot's own drift put the whole map."""
     from evo.core import metrics
     from evo.core.trajectory import PosePath3D
 
+    reference, moved = PosePath3D(poses_se3=list(truth)), PosePath3D(poses_se3=list(estimate))
+    if align:
+        moved.align(reference)
     ape = metrics.APE(metrics.PoseRelation.translation_part)
-    ape.process_data((PosePath3D(poses_se3=list(truth)), PosePath3D(poses_se3=list(estimate))))
+    ape.process_data((reference, moved))
     return float(ape.get_statistic(metrics.StatisticsType.rmse))
