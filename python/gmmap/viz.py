@@ -33,7 +33,7 @@ def save_rerun(
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rec = rr.RecordingStream(f"gmmap/{gmap.reference}")
+    rec = rr.RecordingStream(f"gmmap-{gmap.reference}")  # rerun warns of "/" in an id
     rec.save(str(path))
     rec.log("map", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     points = gmap.sample(n_points)
