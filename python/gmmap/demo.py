@@ -22,9 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gmmap.datasets.geometry import invert
-from gmmap.eval.pairs import describe_pair, pair_errors
-from gmmap.eval.registration import describe_match_errors, error_summary, pose_errors
+from gmmap.eval.pairs import describe_pair, match_errors, pair_errors
+from gmmap.eval.registration import describe_match_errors
 from gmmap.transport import free_port
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
@@ -163,7 +162,8 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
-        "match_errors": match_errors(reports, truth_anchors, poses, kept),
+        # every robot's kept registrations, and the view's as optimised there
+        "match_errors": match_errors(_registered(reports), kept, poses, truth_anchors),
     }
 
 
@@ -192,23 +192,14 @@ def _kept(report: dict):
     return (e for e in report.get("edges", []) if e.get("backend") == "accepted")
 
 
-def match_errors(reports: dict[str, dict], truth: dict, poses: dict, kept: list) -> dict:
-    """Where robots met, against the ground truth of the two anchors (free of the drift the
-    frames' errors carry): each registration a backend kept (every robot's, each pair once)
-    as registered, and ``kept`` (the view's) as optimised in the view's pose graph."""
-    registered = {}
+def _registered(reports: dict[str, dict]) -> list:
+    """Every robot's kept registrations (target, source, transform), each node pair once."""
+    once = {}
     for r in reports.values():
         for e in _kept(r):
             t, s = tuple(e["target"]), tuple(e["source"])
-            if t in truth and s in truth:
-                truth_ts = invert(truth[t]) @ truth[s]
-                registered[frozenset({t, s})] = pose_errors(np.array(e["transform"]), truth_ts)
-    optimised = [
-        pose_errors(invert(poses[t]) @ poses[s], invert(truth[t]) @ truth[s])
-        for t, s in kept
-        if t in poses and s in poses and t in truth and s in truth
-    ]
-    return {**error_summary(list(registered.values())), "optimised": error_summary(optimised)}
+            once[frozenset({t, s})] = (t, s, np.array(e["transform"]))
+    return list(once.values())
 
 
 def format_report(r: dict) -> str:

@@ -18,8 +18,7 @@ import numpy as np
 from gmmap.backend import BackendOptions, BackendResult, PoseGraph
 from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
-from gmmap.eval.pairs import pair_errors
-from gmmap.eval.registration import error_summary, pose_errors
+from gmmap.eval.pairs import match_errors, pair_errors
 from gmmap.globalmap import GlobalMap, build_global_map
 from gmmap.place import Match, PlaceDatabase, PlaceOptions
 from gmmap.select import SelectOptions
@@ -93,18 +92,15 @@ class MergeResult:
         return report
 
     def match_errors(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
-        """Where robots met, against the anchors' ground truth (free of the drift the frames'
-        errors carry): each match the backend kept, as registered and as optimised."""
-        by_key = {(s.robot, s.seq): s for subs in submaps.values() for s in subs}
-        poses = self.backend.poses
-        registered, optimised = [], []
-        for edge in self.backend.accepted:
-            m = self.edge_ids[edge]
-            target = (m.candidate.robot, m.candidate.seq)
-            truth = invert(by_key[target].gt_anchor) @ by_key[m.query].gt_anchor
-            registered.append(pose_errors(m.registration.transform, truth))
-            optimised.append(pose_errors(invert(poses[target]) @ poses[m.query], truth))
-        return {**error_summary(registered), "optimised": error_summary(optimised)}
+        """Each match the backend kept against the anchors' ground truth, as registered and as
+        optimised (`gmmap.eval.pairs.match_errors`)."""
+        truth = {(s.robot, s.seq): s.gt_anchor for subs in submaps.values() for s in subs}
+        kept = [self.edge_ids[e] for e in self.backend.accepted]
+        registered = [
+            ((m.candidate.robot, m.candidate.seq), m.query, m.registration.transform) for m in kept
+        ]
+        nodes = [(t, s) for t, s, _ in registered]
+        return match_errors(registered, nodes, self.backend.poses, truth)
 
 
 def merge(
@@ -211,12 +207,13 @@ def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> d
             before.append(b.to_reference[r] @ s.anchor)
             after.append(b.poses[(r, s.seq)])
             true.append(invert(frames[b.reference[r]]) @ s.gt_anchor)
+    before, after, true = np.array(before), np.array(after), np.array(true)
     return {
         "pairs": pair_errors(b.groups, submaps, b.poses, truth, kept, b.to_reference, frames),
-        "ate_before_m": ate(np.array(before), np.array(true)),
-        "ate_after_m": ate(np.array(after), np.array(true)),
-        "ate_aligned_before_m": ate(np.array(before), np.array(true), align=True),
-        "ate_aligned_after_m": ate(np.array(after), np.array(true), align=True),
+        "ate_before_m": ate(before, true),
+        "ate_after_m": ate(after, true),
+        "ate_aligned_before_m": ate(before, true, align=True),
+        "ate_aligned_after_m": ate(after, true, align=True),
     }
 
 

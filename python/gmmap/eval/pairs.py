@@ -25,7 +25,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from gmmap.datasets.geometry import invert
-from gmmap.eval.registration import pose_errors
+from gmmap.eval.registration import error_summary, pose_errors
 
 Node = tuple[str, int]
 
@@ -57,13 +57,7 @@ def pair_errors(
         nodes = [e for e in met if (e[0][0], e[1][0]) == (a, b)]
         record["matches"] = len(nodes)
         nodes = nodes or _nearest(a, b, poses, truth)
-        errors = np.array(
-            [
-                pose_errors(invert(poses[i]) @ poses[j], invert(truth[i]) @ truth[j])
-                for i, j in nodes
-                if i in poses and j in poses and i in truth and j in truth
-            ]
-        )
+        errors = np.array(_optimised_errors(nodes, poses, truth))
         if len(errors):
             t, r = np.sqrt(np.mean(errors**2, axis=0))
             record["t_error"], record["r_error_deg"] = float(t), float(r)
@@ -71,6 +65,37 @@ def pair_errors(
         t, r = pose_errors(frame, invert(map_to_world[a]) @ map_to_world[b])
         record["frame_t_error"], record["frame_r_error_deg"] = t, r
     return out
+
+
+def match_errors(
+    registered: Iterable[tuple[Node, Node, np.ndarray]],
+    optimised: Iterable[tuple[Node, Node]],
+    poses: Mapping[Node, np.ndarray],
+    truth: Mapping[Node, np.ndarray],
+) -> dict:
+    """Where robots met, against the ground truth of the two anchors (free of the drift the
+    frames' errors carry): each kept registration (target, source, transform) as registered,
+    and each kept (target, source) as optimised in ``poses``; pairs without truth are skipped.
+    An `error_summary` with an ``optimised`` one inside."""
+    as_registered = [
+        pose_errors(T, invert(truth[t]) @ truth[s])
+        for t, s, T in registered
+        if t in truth and s in truth
+    ]
+    return {
+        **error_summary(as_registered),
+        "optimised": error_summary(_optimised_errors(optimised, poses, truth)),
+    }
+
+
+def _optimised_errors(nodes, poses, truth) -> list[tuple[float, float]]:
+    """The optimised relative pose P(i)⁻¹·P(j) of each (i, j) against the truth; pairs missing
+    either are skipped."""
+    return [
+        pose_errors(invert(poses[i]) @ poses[j], invert(truth[i]) @ truth[j])
+        for i, j in nodes
+        if i in poses and j in poses and i in truth and j in truth
+    ]
 
 
 def _nearest(a: str, b: str, poses, truth) -> list[tuple[Node, Node]]:
