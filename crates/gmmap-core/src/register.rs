@@ -260,6 +260,7 @@ impl Problem<'_> {
                 for &i in rows {
                     let p = pose.apply(&src.means[i]);
                     let mut rotated = None;
+                    let mut row = Row::default();
                     for j in 0..tgt.len() {
                         let nu = &tgt.means[j];
                         let e = [p[0] - nu[0], p[1] - nu[1], p[2] - nu[2]];
@@ -280,8 +281,9 @@ impl Problem<'_> {
                             continue;
                         }
                         let w0 = src.weights[i] * tgt.weights[j];
-                        pair(&mut acc, w0, &p, e, &sr, &s, self.cutoff2, derivs);
+                        row.pair(w0, e, &sr, &s, self.cutoff2, derivs);
                     }
+                    row.add_to(&mut acc, &p);
                 }
                 acc
             })
@@ -290,63 +292,102 @@ impl Problem<'_> {
     }
 }
 
-/// Adds one pair's term (source mean moved to `p`, residual `e`, rotated source covariance
-/// `sr`, total covariance `s`) and, if asked, its gradient and Gauss-Newton terms.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn pair(
-    acc: &mut Eval,
-    w0: f64,
-    p: &[f64; 3],
-    e: [f64; 3],
-    sr: &Sym3,
-    s: &Sym3,
-    cutoff2: f64,
-    derivs: bool,
-) {
-    let Some((prec, root_det)) = s.inverse_sqrt_det() else {
-        return;
-    };
-    let q = prec.mul_vec(e);
-    let m = e[0] * q[0] + e[1] * q[1] + e[2] * q[2];
-    if m > cutoff2 {
-        return; // exp(-m/2) is negligible: skip the derivative work too
+/// One source component's pairs, summed before the Jacobian J = [−[p]ₓ, I] (the same for all
+/// of them) is applied: each pair's gradient is g = Jᵀu + (c, 0) with u = −S⁻¹e and c the
+/// covariance-rotation term, so Σ w JᵀPJ, Σ w g and Σ w g gᵀ need only 3-vectors and 3x3 sums
+/// per pair instead of 6x6 products.
+#[derive(Default)]
+struct Row {
+    f: f64,
+    u: [f64; 3],
+    c: [f64; 3],
+    /// Σ w P, Σ w u uᵀ, Σ w c uᵀ and Σ w c cᵀ.
+    p: [[f64; 3]; 3],
+    uu: [[f64; 3]; 3],
+    cu: [[f64; 3]; 3],
+    cc: [[f64; 3]; 3],
+}
+
+impl Row {
+    /// Adds one pair's term (residual `e`, rotated source covariance `sr`, total covariance
+    /// `s`) and, if asked, its derivative sums.
+    #[inline(always)]
+    fn pair(&mut self, w0: f64, e: [f64; 3], sr: &Sym3, s: &Sym3, cutoff2: f64, derivs: bool) {
+        let Some((prec, root_det)) = s.inverse_sqrt_det() else {
+            return;
+        };
+        let q = prec.mul_vec(e);
+        let m = e[0] * q[0] + e[1] * q[1] + e[2] * q[2];
+        if m > cutoff2 {
+            return; // exp(-m/2) is negligible: skip the derivative work too
+        }
+        let w = w0 * INV_2PI_15 / root_det * exp_nonpos(-0.5 * m);
+        self.f += w;
+        if !derivs {
+            return;
+        }
+        // d log w / dω = q × p + (Σ'q) × q − vee(Σ'P − PΣ')/2 ; d log w / dv = −q.
+        let b = cross(&sr.mul_vec(q), &q);
+        let sp = sym_mul(sr, &prec);
+        let c = [
+            b[0] - (sp[1][2] - sp[2][1]),
+            b[1] - (sp[2][0] - sp[0][2]),
+            b[2] - (sp[0][1] - sp[1][0]),
+        ];
+        let u = q.map(|v| -v);
+        let pm = prec.to_rows();
+        for x in 0..3 {
+            self.u[x] += w * u[x];
+            self.c[x] += w * c[x];
+            for y in 0..3 {
+                self.p[x][y] += w * pm[3 * x + y];
+                self.uu[x][y] += w * u[x] * u[y];
+                self.cu[x][y] += w * c[x] * u[y];
+                self.cc[x][y] += w * c[x] * c[y];
+            }
+        }
     }
-    let w = w0 * INV_2PI_15 / root_det * exp_nonpos(-0.5 * m);
-    acc.f += w;
-    if !derivs {
-        return;
-    }
-    // d log w / dω = q × p + (Σ'q) × q − vee(Σ'P − PΣ')/2 ; d log w / dv = −q.
-    let sq = sr.mul_vec(q);
-    let (a, b) = (cross(&q, p), cross(&sq, &q));
-    let sp = sym_mul(sr, &prec);
-    let asym = [
-        sp[1][2] - sp[2][1],
-        sp[2][0] - sp[0][2],
-        sp[0][1] - sp[1][0],
-    ];
-    let g = [
-        a[0] + b[0] - asym[0],
-        a[1] + b[1] - asym[1],
-        a[2] + b[2] - asym[2],
-        -q[0],
-        -q[1],
-        -q[2],
-    ];
-    for (acc_g, gk) in acc.grad.iter_mut().zip(g) {
-        *acc_g += w * gk;
-    }
-    // Gauss-Newton metric: Jᵀ P J with J = [−[p]ₓ, I].
-    let jac = jacobian(p);
-    let pm = prec.to_rows();
-    let pj: [[f64; 6]; 3] = [0, 1, 2].map(|r| {
-        [0, 1, 2, 3, 4, 5].map(|c| (0..3).map(|k| pm[3 * r + k] * jac[k][c]).sum::<f64>())
-    });
-    for (x, (row, grow)) in acc.h.iter_mut().zip(acc.gg.iter_mut()).enumerate() {
-        for (y, (h, gg)) in row.iter_mut().zip(grow.iter_mut()).enumerate().skip(x) {
-            *h += w * (0..3).map(|k| jac[k][x] * pj[k][y]).sum::<f64>();
-            *gg += w * g[x] * g[y];
+
+    /// Adds the row's sums to `acc` with the Jacobian at the moved source mean `p`.
+    // x and y address five matrices at once: plain index loops read best.
+    #[allow(clippy::needless_range_loop)]
+    fn add_to(&self, acc: &mut Eval, p: &[f64; 3]) {
+        acc.f += self.f;
+        if self.f == 0.0 {
+            return;
+        }
+        let jac = jacobian(p);
+        // Jᵀ v = (p × v, v).
+        let ju = cross(p, &self.u);
+        for k in 0..3 {
+            acc.grad[k] += ju[k] + self.c[k];
+            acc.grad[k + 3] += self.u[k];
+        }
+        let jt_m_j = |m: &[[f64; 3]; 3]| {
+            let mj: [[f64; 6]; 3] = [0, 1, 2]
+                .map(|r| [0, 1, 2, 3, 4, 5].map(|c| (0..3).map(|k| m[r][k] * jac[k][c]).sum()));
+            [0, 1, 2, 3, 4, 5].map(|x| {
+                [0, 1, 2, 3, 4, 5].map(|y| (0..3).map(|k| jac[k][x] * mj[k][y]).sum::<f64>())
+            })
+        };
+        let h = jt_m_j(&self.p);
+        // Σ w g gᵀ = Jᵀ UU J + E CU J + (E CU J)ᵀ + E CC Eᵀ, E = [I; 0].
+        let mut gg = jt_m_j(&self.uu);
+        for x in 0..3 {
+            for y in 0..6 {
+                let xj = (0..3).map(|k| self.cu[x][k] * jac[k][y]).sum::<f64>();
+                gg[x][y] += xj;
+                gg[y][x] += xj;
+            }
+            for y in 0..3 {
+                gg[x][y] += self.cc[x][y];
+            }
+        }
+        for x in 0..6 {
+            for y in x..6 {
+                acc.h[x][y] += h[x][y];
+                acc.gg[x][y] += gg[x][y];
+            }
         }
     }
 }
