@@ -210,6 +210,23 @@ def test_two_robots_one_true_match_recovers_the_frame() -> None:
     assert t_err < 0.1 and r_err < 0.6
 
 
+def test_min_matches_holds_a_lone_match_back_until_a_consistent_one_arrives() -> None:
+    world = World({"a": 0, "b": 10}, seed=2, drift=LOW_DRIFT)
+    pg = world.graph(BackendOptions(min_matches=2))
+    first = pg.add_match(*world.wrong_match("a", "b"), INFO)
+    result = pg.optimize()
+    assert result.groups == [["a"], ["b"]] and result.rejected == {first: "pending"}
+    # A true match does not agree with the wrong one: PCM keeps one, still too few.
+    second = pg.add_match(*world.true_match("a", "b", 12), INFO)
+    assert pg.optimize().groups == [["a"], ["b"]]
+    third = pg.add_match(*world.true_match("a", "b", 20), INFO)
+    result = pg.optimize()
+    assert result.groups == [["a", "b"]]
+    assert result.accepted == [second, third] and result.rejected == {first: "pcm"}
+    with pytest.raises(InvalidInputError, match="min_matches"):
+        BackendOptions(min_matches=0)
+
+
 def test_wrong_matches_are_rejected_by_pcm() -> None:
     world = World({"a": 0, "b": 10}, seed=4)
     pg, oracle = world.graph(), world.graph()

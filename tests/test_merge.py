@@ -105,6 +105,11 @@ def test_merge_cli_json(tmp_path, slice_robots):
     assert np.array(report["robots"][1]["to_reference"]).shape == (4, 4)
     assert {"groups", "accepted_edges", "rejected_edges"} <= set(report)
     assert (out / "globalmap_a.png").is_file() and (out / "merge.json").is_file()
+    # --min-matches reaches the pose graph: more than the robots share keeps them apart.
+    args = [str(tmp_path / "a"), str(tmp_path / "b"), "--json", "--min-confidence", "0.55"]
+    r = CliRunner().invoke(main, ["merge", *args, "--min-matches", "99"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["groups"] == [["a"], ["b"]]
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,8 @@ heuristic clique) is kept per robot pair. Then GNC (graduated non-convexity, tru
 squares; odometry and priors known inliers) in the optimisation.
 
 Limits: PCM needs two matches between the same robots; a single match can only be rejected by
-GNC, and only when other robots' matches contradict it. Wrong matches that are consistent with
+GNC, and only when other robots' matches contradict it (``min_matches=2`` holds it back
+instead). Wrong matches that are consistent with
 each other (perceptual aliasing along a corridor) can win the clique; nothing here detects
 that. Loop closures within one robot go through the same test with both odometry legs taken
 as independent, which they are not where they overlap (approximate there).
@@ -89,6 +90,10 @@ class BackendOptions:
     # pair, while random wrong matches sit at d² in the thousands; GNC judges what passes.
     pcm_probability: float = 0.999
     pcm_exact_budget: int = 5_000  # branch-and-bound nodes per robot pair
+    # Two robots' maps join only once this many of their matches are mutually consistent;
+    # fewer are held back ("pending") until more arrive. 1 trusts a single match, which PCM
+    # cannot test; 2 stops a lone aliased match (a corridor seen end for end) from joining.
+    min_matches: int = 1
     gnc: bool = True
     gnc_probability: float = 0.99  # χ² quantile of GNC's inlier threshold
     prior_sigma: float = 1e-4  # the reference prior (m and rad)
@@ -114,6 +119,8 @@ class BackendOptions:
         for name in ("translation_floor", "rotation_floor", "prior_sigma"):
             if getattr(self, name) <= 0:
                 raise InvalidInputError(f"BackendOptions.{name} must be > 0")
+        if int(self.min_matches) != self.min_matches or self.min_matches < 1:
+            raise InvalidInputError("BackendOptions.min_matches must be an integer >= 1")
         for name in ("pcm_probability", "gnc_probability"):
             if not 0 < getattr(self, name) < 1:
                 raise InvalidInputError(f"BackendOptions.{name} must be in (0, 1)")
@@ -143,8 +150,8 @@ class BackendResult:
     ``poses``: optimised anchor poses, each in its group's reference frame (= the reference
     robot's map frame). ``to_reference[r]`` maps robot r's map frame into its reference's
     (identity for a reference robot; see `PoseGraph` for the estimator). ``rejected`` maps an
-    edge id to why: "confidence", "pcm" or "gnc". ``edges`` maps every edge id to its
-    (target, source) nodes.
+    edge id to why: "confidence", "pcm", "pending" (fewer than ``min_matches`` between its
+    robots) or "gnc". ``edges`` maps every edge id to its (target, source) nodes.
     """
 
     poses: dict[Node, np.ndarray]
@@ -296,6 +303,11 @@ class PoseGraph:
                 kept += [pair[k] for k in inliers]
                 rejected.update({pair[k].id: "pcm" for k in set(range(len(pair))) - inliers})
             candidates = sorted(kept, key=lambda m: m.id)
+        if o.min_matches > 1:
+            for (a, b), pair in _by_robot_pair(candidates).items():
+                if a != b and len(pair) < o.min_matches:
+                    rejected.update({m.id: "pending" for m in pair})
+            candidates = [m for m in candidates if m.id not in rejected]
         t_pcm = time.perf_counter() - t_pcm
 
         t_opt = time.perf_counter()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -36,6 +36,14 @@ _ODOMETRY_DRIFT = click.option(
     show_default=True,
     help="Odometry noise of the pose graph, per metre (0.002 for motion-capture poses).",
 )
+_MIN_MATCHES = click.option(
+    "--min-matches",
+    default=1,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Join two robots' maps only once this many of their matches agree (2: a lone "
+    "aliased match cannot merge them).",
+)
 _MIN_CONFIDENCE = click.option(
     "--min-confidence", default=0.75, show_default=True, help="C_thr of the verification."
 )
@@ -61,6 +69,7 @@ def main() -> None:
     show_default=True,
     help="Odometry drift per metre (and rad per rad turned) of the simulated robots.",
 )
+@_MIN_MATCHES
 @click.option("--linger", default=5.0, show_default=True, help="Seconds robots stay after.")
 @click.option(
     "--out",
@@ -77,6 +86,7 @@ def demo(
     sensor: str,
     sim_width: int,
     drift: float,
+    min_matches: int,
     linger: float,
     out: Path | None,
     as_json: bool,
@@ -86,7 +96,7 @@ def demo(
 
     r = run_demo(
         robots, world, seed, frames_per_submap, max_frames, sensor, sim_width, drift, linger,
-        out, _log,
+        out, _log, min_matches=min_matches,
     )  # fmt: skip
     click.echo(json.dumps(r) if as_json else format_report(r))
 
@@ -120,6 +130,7 @@ def demo(
     "--covariance", type=click.Choice(["diag", "full"]), default="diag", show_default=True
 )
 @_ODOMETRY_DRIFT
+@_MIN_MATCHES
 @_MIN_CONFIDENCE
 @click.option("--linger", default=5.0, show_default=True, help="Seconds to stay after mapping.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
@@ -153,6 +164,7 @@ def robot(
     components: int,
     covariance: str,
     odometry_drift: float,
+    min_matches: int,
     min_confidence: float,
     linger: float,
     report_path: Path | None,
@@ -197,7 +209,7 @@ def robot(
         ),
         linger=linger,
         wait_for=tuple(wait_for),
-        backend=BackendOptions.for_drift(odometry_drift),
+        backend=replace(BackendOptions.for_drift(odometry_drift), min_matches=min_matches),
         place=PlaceOptions(min_confidence=min_confidence),
     )
 
@@ -506,10 +518,11 @@ def _slice(text: str) -> slice:
     help="Robustness test: replace this fraction of verified matches by wrong ones.",
 )
 @_ODOMETRY_DRIFT
+@_MIN_MATCHES
 @click.option("--seed", default=0, show_default=True, help="Seeds --wrong-matches.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidence: float,
-          wrong_matches: float, odometry_drift: float, seed: int,
+          wrong_matches: float, odometry_drift: float, min_matches: int, seed: int,
           as_json: bool) -> None:  # fmt: skip
     """Merge submap folders of several robots (from `gmmap build`): place recognition,
     registration, the robust pose graph and a global map per connected group."""
@@ -535,7 +548,7 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
         submaps[subs[0].robot] = subs
     options = MergeOptions(
         PlaceOptions(top_k=top_k, min_confidence=min_confidence),
-        BackendOptions.for_drift(odometry_drift),
+        replace(BackendOptions.for_drift(odometry_drift), min_matches=min_matches),
         wrong_matches=wrong_matches,
         seed=seed,
     )

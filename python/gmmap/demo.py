@@ -41,6 +41,7 @@ def run_demo(
     linger: float = 5.0,
     out: Path | None = None,
     log=print,
+    min_matches: int = 1,
 ) -> dict:
     start = time.perf_counter()
     if out is None:
@@ -61,7 +62,7 @@ def run_demo(
             "--robots", str(robots), "--seed", str(seed), "--sensor", sensor,
             "--sim-width", str(sim_width), "--sim-drift", str(drift),
             # the pose graph's odometry noise follows the simulated drift (with a floor)
-            "--odometry-drift", str(max(drift, 0.001)),
+            "--odometry-drift", str(max(drift, 0.001)), "--min-matches", str(min_matches),
             "--port", str(ports[i]), "--store", str(out / f"{name}.sqlite"),
             "--frames-per-submap", str(frames_per_submap), "--linger", str(linger),
             "--report", str(out / f"{name}.json"), "--json",
