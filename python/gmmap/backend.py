@@ -28,8 +28,9 @@ squares; odometry and priors known inliers) in the optimisation.
 Limits: PCM needs two matches between the same robots; a single match can only be rejected by
 GNC, and only when other robots' matches contradict it (``min_matches=2`` holds it back
 instead). Wrong matches that are consistent with each other (perceptual aliasing along a
-corridor) can win the clique; nothing here detects that. Loop closures within one robot go through the same test with both odometry legs taken
-as independent, which they are not where they overlap (approximate there).
+corridor) can win the clique; nothing here detects that. Loop closures within one robot go
+through the same test with both odometry legs taken as independent, which they are not where
+they overlap (approximate there).
 
 Incremental use: add submaps and matches as they arrive and call `optimize` again. The graph
 is re-solved in batch (GNC needs the whole graph; factors are built once), warm-started from

@@ -627,6 +627,9 @@ def evaluate() -> None:
 @click.option("--max-pairs", type=int, help="Evaluate only the first pairs.")
 @click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
 @click.option("--voxel", default=0.05, show_default=True, help="Submap voxel size (m).")
+@click.option(
+    "--components", default=100, show_default=True, help="Components per submap (KITTI: 300)."
+)
 @click.option("--seed", default=0, show_default=True, help="Seeds the global perturbations.")
 @click.option("--scales", help="Registration coarse-to-fine ladder, e.g. 0.5,0.1,0 (metres).")
 @click.option(
@@ -649,6 +652,7 @@ def eval_registration(
     max_pairs: int | None,
     stride: int | None,
     voxel: float,
+    components: int,
     seed: int,
     scales: str | None,
     odometry_guess: bool,
@@ -676,7 +680,7 @@ def eval_registration(
     if drift is not None:
         loader_options["drift"] = datasets.Drift(translation=drift)
     frames = datasets.open(path, **loader_options)
-    options = BuildOptions(covariance="full", voxel_size=voxel)
+    options = BuildOptions(covariance="full", voxel_size=voxel, n_components=components)
     try:
         ladder = tuple(float(v) for v in scales.split(",")) if scales else None
     except ValueError:
