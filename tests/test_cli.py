@@ -41,3 +41,14 @@ def test_bench_em_compares_with_sklearn():
         ).stdout
     )
     assert r["points"] == 3000 and r["sklearn"]["time_s"] > 0 and r["speedup"] > 0
+
+
+def test_bad_input_is_one_line_not_a_traceback(tmp_path):
+    for args in (
+        ["info", str(tmp_path)],
+        ["eval", "registration", str(tmp_path)],
+        ["build", str(tmp_path), "--out", str(tmp_path / "out")],
+    ):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 1, (args, r.output)
+        assert "not a dataset gmmap can read" in r.output and "Traceback" not in r.output

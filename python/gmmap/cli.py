@@ -49,7 +49,19 @@ _MIN_CONFIDENCE = click.option(
 )
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Commands(click.Group):
+    """Bad input is the user's to fix: one line naming it, not a traceback."""
+
+    def invoke(self, ctx: click.Context):
+        from gmmap.errors import GmmapError
+
+        try:
+            return super().invoke(ctx)
+        except (GmmapError, FileNotFoundError) as exc:
+            raise click.ClickException(str(exc)) from exc
+
+
+@click.group(cls=_Commands, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="gmmap")
 def main() -> None:
     """gmmap: multi-robot mapping with Gaussian Mixture Model submaps."""
@@ -942,16 +954,11 @@ def info(
     is one); the ground truth's is given too when the data has one.
     """
     from gmmap import datasets
-    from gmmap.errors import GmmapError
 
     given = dict(stride=stride, topic=topic, odom_topic=odom_topic, voxel=voxel)
     options = {k: v for k, v in given.items() if v is not None}
-    try:
-        seq = datasets.open(path, format=fmt, **options)
-        r = {"path": str(path), **datasets.describe(seq, max_frames=max(1, sample))}
-    except (GmmapError, FileNotFoundError) as exc:
-        # Bad data is the user's to fix: one line naming the file, not a traceback.
-        raise click.ClickException(str(exc)) from exc
+    seq = datasets.open(path, format=fmt, **options)
+    r = {"path": str(path), **datasets.describe(seq, max_frames=max(1, sample))}
     if as_json:
         click.echo(json.dumps(r))
         return

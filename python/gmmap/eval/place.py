@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmmap.datasets.geometry import invert
+from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import pose_errors
 from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
 from gmmap.register import register
@@ -59,7 +60,7 @@ def positives(
 ) -> np.ndarray:
     """Cross-robot pairs whose views overlap (see the module docs)."""
     if any(s.gt_anchor is None or s.points is None for s in submaps):
-        raise ValueError("place evaluation needs ground-truth poses and the submaps' points")
+        raise InvalidInputError("place evaluation needs ground-truth poses and the submaps' points")
     clouds = [world_points(s) for s in submaps]
     voxels = [set(map(tuple, np.floor(c / voxel).astype(np.int64))) for c in clouds]
     centres = np.array([c.mean(axis=0) for c in clouds])
@@ -204,7 +205,7 @@ def evaluate_place(
     submaps, pos = place_set.submaps, place_set.positives
     queries = place_set.queries
     if len(queries) == 0:
-        raise ValueError("no submap overlaps another robot's: nothing to recognise")
+        raise InvalidInputError("no submap overlaps another robot's: nothing to recognise")
     robots = np.array([s.robot for s in submaps])
     db = PlaceDatabase(ShapeDescriptor(), options)
     say = progress or (lambda _m: None)

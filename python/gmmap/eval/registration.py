@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gmmap.errors import InvalidInputError
 from gmmap.register import register
 from gmmap.submap import BuildOptions, Submap, build_submaps
 
@@ -206,12 +207,14 @@ def evaluate_registration(
     scales = scales or (ODOMETRY_SCALES if odometry_guess else None)
     frames = frames if max_pairs is None else frames[: (max_pairs + 1) * frames_per_submap]
     if frames[0].gt_pose is None:
-        raise ValueError("registration evaluation needs ground-truth poses")
+        raise InvalidInputError("registration evaluation needs ground-truth poses")
     pairs = build_pairs(
         frames, frames_per_submap, methods, options, global_mode, seed, progress, odometry_guess
     )
     if not pairs:
-        raise ValueError(f"{len(frames)} frames make fewer than two submaps of {frames_per_submap}")
+        raise InvalidInputError(
+            f"{len(frames)} frames make fewer than two submaps of {frames_per_submap}"
+        )
     result: dict = {
         "pairs": len(pairs),
         "frames_per_submap": frames_per_submap,

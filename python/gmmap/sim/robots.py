@@ -8,6 +8,8 @@ from itertools import pairwise
 
 import numpy as np
 
+from gmmap.errors import InvalidInputError
+
 
 @dataclass(frozen=True)
 class Motion:
@@ -23,7 +25,7 @@ class Motion:
 def route_poses(route: list[tuple[float, float]], motion: Motion) -> np.ndarray:
     """(M, 4, 4) body→world poses sampled at ``motion.rate`` along the route (z = 0)."""
     if len(route) < 2:
-        raise ValueError("a route needs at least two waypoints")
+        raise InvalidInputError("a route needs at least two waypoints")
     keys = _keyframes(np.asarray(route, dtype=np.float64), motion)
     t = np.arange(0.0, keys[-1, 0] + 1e-9, 1.0 / motion.rate)
     x, y, yaw = (np.interp(t, keys[:, 0], keys[:, i]) for i in (1, 2, 3))
