@@ -93,11 +93,8 @@ def test_merge_cli_json(tmp_path, slice_robots):
     for name, subs in slice_robots.items():
         write_submaps(subs, tmp_path / name)
     out = tmp_path / "out"
-    r = CliRunner().invoke(
-        main,
-        ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out), "--json",
-         "--min-confidence", "0.55"],
-    )  # fmt: skip
+    args = [str(tmp_path / "a"), str(tmp_path / "b"), "--json", "--min-confidence", "0.55"]
+    r = CliRunner().invoke(main, ["merge", *args, "--out", str(out)])
     assert r.exit_code == 0, r.output
     report = json.loads(r.stdout)
     assert report["reference"] == "a"
@@ -106,7 +103,6 @@ def test_merge_cli_json(tmp_path, slice_robots):
     assert {"groups", "accepted_edges", "rejected_edges"} <= set(report)
     assert (out / "globalmap_a.png").is_file() and (out / "merge.json").is_file()
     # --min-matches reaches the pose graph: more than the robots share keeps them apart.
-    args = [str(tmp_path / "a"), str(tmp_path / "b"), "--json", "--min-confidence", "0.55"]
     r = CliRunner().invoke(main, ["merge", *args, "--min-matches", "99"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["groups"] == [["a"], ["b"]]

@@ -50,6 +50,7 @@ import itertools
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -100,14 +101,16 @@ class BackendOptions:
     max_iterations: int = 100  # Levenberg-Marquardt, per GNC step
 
     @classmethod
-    def for_drift(cls, drift: float) -> BackendOptions:
-        """Odometry noise of `Drift.per_metre` (drift): the default 0.02 is `Drift`'s wheel
-        odometry; motion-capture poses (TUM's ground truth) are nearer 0.002."""
+    def for_drift(cls, drift: float, **options: Any) -> BackendOptions:
+        """Odometry noise of `Drift.per_metre` (drift), the other ``options`` as given: the
+        default 0.02 is `Drift`'s wheel odometry; motion-capture poses (TUM's ground truth)
+        are nearer 0.002."""
         d = Drift.per_metre(drift)
         return cls(
             translation=d.translation,
             rotation_per_rad=d.rotation_per_rad,
             rotation_per_m=d.rotation_per_m,
+            **options,
         )
 
     def __post_init__(self) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -221,7 +221,7 @@ def robot(
         ),
         linger=linger,
         wait_for=tuple(wait_for),
-        backend=replace(BackendOptions.for_drift(odometry_drift), min_matches=min_matches),
+        backend=BackendOptions.for_drift(odometry_drift, min_matches=min_matches),
         place=PlaceOptions(min_confidence=min_confidence),
     )
 
@@ -560,7 +560,7 @@ def merge(folders: tuple[Path, ...], out: Path | None, top_k: int, min_confidenc
         submaps[subs[0].robot] = subs
     options = MergeOptions(
         PlaceOptions(top_k=top_k, min_confidence=min_confidence),
-        replace(BackendOptions.for_drift(odometry_drift), min_matches=min_matches),
+        BackendOptions.for_drift(odometry_drift, min_matches=min_matches),
         wrong_matches=wrong_matches,
         seed=seed,
     )

@@ -252,12 +252,16 @@ class PlaceDatabase:
         target = self.gmms[(candidate.robot, candidate.seq)]
         if target is None:
             raise InvalidInputError(f"{candidate.robot}/{candidate.seq} has no GMM to verify")
+        reg = self.register_pair(gmm, target)
+        return Match((robot, seq), candidate, reg, self.score(reg) >= self.options.min_confidence)
+
+    def register_pair(self, query: Gmm, target: Gmm) -> Registration:
+        """`register` with no initial guess, from the descriptor's yaw hint when it has one."""
         hint = None
         if self.options.use_yaw_hint and hasattr(self.descriptor, "yaw"):
             n = self.options.resample_points
-            hint = self.descriptor.yaw(resample(gmm, n), resample(target, n))
-        reg = register(gmm, target, yaw_hint=hint, dof=self.options.dof)
-        return Match((robot, seq), candidate, reg, self.score(reg) >= self.options.min_confidence)
+            hint = self.descriptor.yaw(resample(query, n), resample(target, n))
+        return register(query, target, yaw_hint=hint, dof=self.options.dof)
 
     def score(self, reg: Registration) -> float:
         """The confidence C, scaled down to 0 as the best other basin's confidence rises from

@@ -29,8 +29,7 @@ import numpy as np
 from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import pose_errors
-from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
-from gmmap.register import register
+from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor
 from gmmap.submap import BuildOptions, Submap, build_submaps
 
 CORRECT_M, CORRECT_DEG = 0.2, 3.0
@@ -121,11 +120,7 @@ def is_correct(estimate: np.ndarray, source: Submap, target: Submap) -> bool:
 
 
 def verify_gmm(source: Submap, target: Submap, db: PlaceDatabase) -> tuple[float, np.ndarray]:
-    hint = None
-    if db.options.use_yaw_hint and hasattr(db.descriptor, "yaw"):
-        n = db.options.resample_points
-        hint = db.descriptor.yaw(resample(source.gmm, n), resample(target.gmm, n))
-    r = register(source.gmm, target.gmm, yaw_hint=hint, dof=db.options.dof)
+    r = db.register_pair(source.gmm, target.gmm)
     return db.score(r), r.transform
 
 
