@@ -31,9 +31,9 @@ import time
 import gtsam
 import numpy as np
 
-from gmmap.backend import BackendOptions, PoseGraph, adjoint, right_information
-from gmmap.datasets.drift import Drift, apply_drift
-from gmmap.datasets.geometry import invert, rotation_angle, so3_exp
+from gmmap.mapping.backend import BackendOptions, PoseGraph, adjoint, right_information
+from gmmap.math.drift import Drift, apply_drift
+from gmmap.math.geometry import invert, rotation_angle, so3_exp
 
 MATCH_SIGMA_R = 0.01
 MATCH_SIGMA_T = 0.03

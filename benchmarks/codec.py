@@ -32,8 +32,6 @@ from pathlib import Path
 import numpy as np
 
 import gmmap
-from gmmap import datasets
-from gmmap.codec import DEFAULT_DISTORTION, KIND_SUBMAP
 from gmmap.eval.registration import (
     SUCCESS_DEG,
     SUCCESS_M,
@@ -43,7 +41,9 @@ from gmmap.eval.registration import (
     run_method,
     summarise,
 )
-from gmmap.submap import BuildOptions, Submap
+from gmmap.fleet.codec import DEFAULT_DISTORTION, KIND_SUBMAP
+from gmmap.io import datasets
+from gmmap.mapping.submap import BuildOptions, Submap
 
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

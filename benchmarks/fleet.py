@@ -1,6 +1,6 @@
 """Fleet scaling: how bytes, CPU and memory per robot grow from 2 to 8 robots.
 
-Prints one JSON object. For each fleet size the whole demo runs (``gmmap.demo.run_demo``:
+Prints one JSON object. For each fleet size the whole demo runs (``gmmap.cli.demo.run_demo``:
 simulated robots in the office world as separate ``gmmap robot`` processes on loopback Zenoh,
 16-beam LiDAR, 20 frames per submap). Per robot: payload bytes sent and received, the
 bytes a point-cloud system would send for the same submaps (voxelised points as float32, the
@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from gmmap.demo import run_demo
+from gmmap.cli.demo import run_demo
 
 
 def per_robot(values: dict) -> dict:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from gmmap.datasets import BUNDLED_TUM_SLICE, KittiOdometry, TumRgbd
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, KittiOdometry, TumRgbd
 
 SHARED = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

@@ -1,4 +1,4 @@
-"""Merge: issue 7's figures from the offline pipeline (`gmmap.merge.merge`), in one run.
+"""Merge: issue 7's figures from the offline pipeline (`gmmap.mapping.mapper.merge`), in one run.
 
 Prints one JSON object. Each case builds full-covariance 20-frame submaps per robot and merges
 them; against ground truth: every robot pair's relative pose where they met and of their map
@@ -21,12 +21,12 @@ import os
 import sys
 from pathlib import Path
 
-from gmmap import datasets
-from gmmap.backend import BackendOptions
-from gmmap.datasets.drift import Drift
-from gmmap.merge import MergeOptions, merge
-from gmmap.sim import UP, get_world, robot_sensor, simulate
-from gmmap.submap import BuildOptions, build_submaps
+from gmmap.io import datasets
+from gmmap.io.sim import UP, get_world, robot_sensor, simulate
+from gmmap.mapping.backend import BackendOptions
+from gmmap.mapping.mapper import MergeOptions, merge
+from gmmap.mapping.submap import BuildOptions, build_submaps
+from gmmap.math.drift import Drift
 
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

@@ -19,8 +19,8 @@ import os
 import sys
 from pathlib import Path
 
-from gmmap import datasets
 from gmmap.eval.place import evaluate_place, sim_place_set, split_place_set
+from gmmap.io import datasets
 
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

@@ -20,9 +20,9 @@ import time
 import numpy as np
 
 from gmmap.eval.planner import SCENES, astar, map_scene, occupancy_grid, shortcut
-from gmmap.planner import GradientPlanner, PlannerOptions
-from gmmap.sim import get_world
-from gmmap.submap import concatenate
+from gmmap.io.sim import get_world
+from gmmap.mapping.planner import GradientPlanner, PlannerOptions
+from gmmap.mapping.submap import concatenate
 
 
 def timed(fn, repeat: int) -> float:

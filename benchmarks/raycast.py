@@ -19,7 +19,7 @@ import numpy as np
 
 
 def measure(frames: int) -> dict:
-    from gmmap.sim import DepthCamera, get_world, simulate
+    from gmmap.io.sim import DepthCamera, get_world, simulate
 
     world, cam = get_world("office"), DepthCamera()
     robot = simulate(world, 1, sensor=cam)[0]

@@ -24,9 +24,9 @@ import sys
 import time
 from pathlib import Path
 
-from gmmap import datasets
 from gmmap.eval.registration import evaluate_registration
-from gmmap.submap import BuildOptions
+from gmmap.io import datasets
+from gmmap.mapping.submap import BuildOptions
 
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

@@ -37,8 +37,8 @@ def log(msg: str) -> None:
 
 
 def datasets() -> dict:
-    from gmmap import datasets as ds
-    from gmmap.sim import DepthCamera, get_world, simulate
+    from gmmap.io import datasets as ds
+    from gmmap.io.sim import DepthCamera, get_world, simulate
 
     cam = DepthCamera(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
     out = {"sim_office": (simulate(get_world("office"), 1, sensor=cam)[0], 20)}
@@ -56,8 +56,8 @@ def datasets() -> dict:
 
 
 def selection_figures(frames, frames_per_submap: int) -> dict:
-    from gmmap.select import SelectOptions, select_components
-    from gmmap.submap import BuildOptions, build_submaps, select_and_refine
+    from gmmap.mapping.submap import BuildOptions, build_submaps, select_and_refine
+    from gmmap.math.select import SelectOptions, select_components
 
     opts = BuildOptions(frames_per_submap=frames_per_submap, select=False, holdout=0.1)
     submaps = list(build_submaps(frames, "bench", opts))[:6]
@@ -123,8 +123,8 @@ def selection_figures(frames, frames_per_submap: int) -> dict:
 TIMING_CHILD = """
 import json, sys, time
 import numpy as np
-from gmmap.datasets import open as open_data
-from gmmap.submap import BuildOptions, SubmapBuilder
+from gmmap.io.datasets import open as open_data
+from gmmap.mapping.submap import BuildOptions, SubmapBuilder
 frames = open_data(sys.argv[1], stride=int(sys.argv[2]))[:40]
 times = []
 for rep in range(3):
@@ -140,7 +140,7 @@ print(json.dumps({"best_s": min(times), "mean_s": sum(times) / len(times),
 
 
 def timing() -> dict:
-    from gmmap.datasets import BUNDLED_TUM_SLICE
+    from gmmap.io.datasets import BUNDLED_TUM_SLICE
 
     root = DATA / "tum_fr1_xyz"
     root = root if root.is_dir() else BUNDLED_TUM_SLICE
@@ -160,8 +160,8 @@ def timing() -> dict:
 
 def fig2() -> dict:
     """Two robots cross room D of the office on different paths; one submap each."""
-    from gmmap.sim import DepthCamera, Motion, World, get_world, simulate
-    from gmmap.submap import BuildOptions, build_submaps
+    from gmmap.io.sim import DepthCamera, Motion, World, get_world, simulate
+    from gmmap.mapping.submap import BuildOptions, build_submaps
 
     office = get_world("office")
     routes = [[(2.0, 7.0), (6.5, 7.0), (8.5, 8.8)], [(8.5, 9.2), (4.0, 9.3), (1.2, 8.0)]]

@@ -4,8 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.points import voxel_filter
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.math.points import voxel_filter
 
 SHARED_DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")

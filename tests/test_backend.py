@@ -6,7 +6,8 @@ import gtsam
 import numpy as np
 import pytest
 
-from gmmap.backend import (
+from gmmap.errors import InvalidInputError
+from gmmap.mapping.backend import (
     BackendOptions,
     PoseGraph,
     adjoint,
@@ -15,9 +16,8 @@ from gmmap.backend import (
     right_information,
     se3_log,
 )
-from gmmap.datasets.drift import Drift, apply_drift
-from gmmap.datasets.geometry import invert, rotation_angle, so3_exp
-from gmmap.errors import InvalidInputError
+from gmmap.math.drift import Drift, apply_drift
+from gmmap.math.geometry import invert, rotation_angle, so3_exp
 
 N = 30  # submaps per robot: one lap of a circle each
 SIGMA_R, SIGMA_T = 0.005, 0.02  # match noise

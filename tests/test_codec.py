@@ -16,9 +16,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import gmmap
-from gmmap import DecodeError, Gmm, InvalidInputError, codec
-from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.submap import BuildOptions, Submap, build_submaps, level
+from gmmap import DecodeError, Gmm, InvalidInputError
+from gmmap.fleet import codec
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.mapping.submap import BuildOptions, Submap, build_submaps, level
 
 D = codec.DEFAULT_DISTORTION
 QMIN = math.ldexp(1.0, -codec.QMIN_EXPONENT)

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-import gmmap.datasets as datasets
+import gmmap.io.datasets as datasets
 from gmmap import FileFormatError
-from gmmap.datasets import BUNDLED_TUM_SLICE, Drift, TumRgbd
-from gmmap.datasets.trajectory import write_trajectory
-from gmmap.datasets.tum import (
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, Drift, TumRgbd
+from gmmap.io.datasets.trajectory import write_trajectory
+from gmmap.io.datasets.tum import (
     INTRINSICS,
     Intrinsics,
     associate,

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from gmmap import InvalidInputError
-from gmmap.datasets.drift import Drift, apply_drift
-from gmmap.datasets.geometry import invert, rotation_angle, so3_exp
+from gmmap.math.drift import Drift, apply_drift
+from gmmap.math.geometry import invert, rotation_angle, so3_exp
 
 
 def straight_line(n: int, step: float = 0.1) -> np.ndarray:

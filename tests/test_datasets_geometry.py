@@ -1,6 +1,6 @@
 import numpy as np
 
-from gmmap.datasets.geometry import (
+from gmmap.math.geometry import (
     interpolate_poses,
     invert,
     make_poses,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gmmap import FileFormatError
-from gmmap.datasets import Drift, KittiOdometry
+from gmmap.io.datasets import Drift, KittiOdometry
 
 
 @pytest.fixture(scope="module")

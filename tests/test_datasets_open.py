@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import gmmap.datasets as datasets
+import gmmap.io.datasets as datasets
 from gmmap import FileFormatError, InvalidInputError
 from gmmap.cli import main
-from gmmap.datasets import BUNDLED_TUM_SLICE, KittiOdometry, PointFiles, TumRgbd
 from gmmap.errors import UnknownFormatError
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, KittiOdometry, PointFiles, TumRgbd
 
 INFO_KEYS = {"format", "frames", "duration_s", "path_length_m", "points_per_frame"}
 

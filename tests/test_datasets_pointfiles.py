@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from gmmap import FileFormatError
-from gmmap.datasets import Drift, PointFiles
-from gmmap.datasets.pcd import read_pcd
-from gmmap.datasets.ply import read_ply
-from gmmap.datasets.ply import write_ply as write_ply_file
+from gmmap.io.datasets import Drift, PointFiles
+from gmmap.io.datasets.pcd import read_pcd
+from gmmap.io.datasets.ply import read_ply
+from gmmap.io.datasets.ply import write_ply as write_ply_file
 
 
 def cloud(n: int = 200, seed: int = 0) -> np.ndarray:

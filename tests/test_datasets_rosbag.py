@@ -6,11 +6,11 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gmmap import FileFormatError, InvalidInputError
-from gmmap.datasets import RosBag, detect_format
-from gmmap.datasets import open as open_dataset
-from gmmap.datasets.geometry import make_poses
-from gmmap.datasets.rosbag import decode_pointcloud2
 from gmmap.errors import TopicNotFoundError
+from gmmap.io.datasets import RosBag, detect_format
+from gmmap.io.datasets import open as open_dataset
+from gmmap.io.datasets.rosbag import decode_pointcloud2
+from gmmap.math.geometry import make_poses
 
 T0 = 1_700_000_000.0
 CLOUD_STAMPS = T0 + 0.1 * np.arange(6)  # 0.0 … 0.5 s

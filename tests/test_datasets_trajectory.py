@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from gmmap import FileFormatError
-from gmmap.datasets.geometry import make_poses
-from gmmap.datasets.trajectory import associate, read_trajectory, write_trajectory
+from gmmap.io.datasets.trajectory import associate, read_trajectory, write_trajectory
+from gmmap.math.geometry import make_poses
 
 
 def random_poses(n, seed=0):

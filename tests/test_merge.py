@@ -7,15 +7,15 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import BUNDLED_TUM_SLICE
-from gmmap.backend import BackendOptions
 from gmmap.cli import main
-from gmmap.datasets.tum import TumRgbd
-from gmmap.em import fit_gmm
 from gmmap.errors import InvalidInputError
-from gmmap.globalmap import GlobalMap, build_global_map
-from gmmap.merge import MergeOptions, merge
-from gmmap.place import PlaceOptions
-from gmmap.submap import BuildOptions, Submap, build_submaps
+from gmmap.io.datasets.tum import TumRgbd
+from gmmap.mapping.backend import BackendOptions
+from gmmap.mapping.globalmap import GlobalMap, build_global_map
+from gmmap.mapping.mapper import MergeOptions, merge
+from gmmap.mapping.place import PlaceOptions
+from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
+from gmmap.math.em import fit_gmm
 
 
 def submap_of(robot: str, gmm, anchor=None, n_points=1000) -> Submap:
@@ -88,7 +88,7 @@ def test_merge_recovers_the_relative_frame(slice_robots):
 
 
 def test_merge_cli_json(tmp_path, slice_robots):
-    from gmmap.submap import write_submaps
+    from gmmap.mapping.submap import write_submaps
 
     for name, subs in slice_robots.items():
         write_submaps(subs, tmp_path / name)
@@ -111,8 +111,8 @@ def test_merge_cli_json(tmp_path, slice_robots):
 @pytest.fixture(scope="module")
 def sim_robots():
     """Two simulated LiDAR robots in the office with drifting odometry; they meet in room B."""
-    from gmmap.datasets.drift import Drift
-    from gmmap.sim import UP, Lidar, get_world, simulate
+    from gmmap.io.sim import UP, Lidar, get_world, simulate
+    from gmmap.math.drift import Drift
 
     drift = Drift(seed=0, up=UP)
     run = simulate(get_world("office"), 2, seed=0, sensor=Lidar(), odometry=drift)
@@ -157,7 +157,7 @@ def test_fr1_xyz_halves_merge_to_three_centimetres(shared_data):
 
 
 def test_global_map_rerun_recording(tmp_path, slice_points):
-    from gmmap import viz
+    from gmmap.io import viz
 
     if not viz.available():
         pytest.skip("rerun-sdk (the viz extra) is not installed")

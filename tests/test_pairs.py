@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from gmmap.datasets.geometry import invert
 from gmmap.eval.pairs import describe_pair, pair_errors
+from gmmap.math.geometry import invert
 
 
 def _pose(x: float, y: float, yaw_deg: float = 0.0) -> np.ndarray:

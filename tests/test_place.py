@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from gmmap.em import fit_gmm
 from gmmap.errors import InvalidInputError
 from gmmap.eval.place import positives, pr_curve, recall_curve
-from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
-from gmmap.sim import World, simulate
-from gmmap.sim.world import cabinet, chair, pillar, shelf, table, wall
-from gmmap.submap import BuildOptions, build_submaps
+from gmmap.io.sim import World, simulate
+from gmmap.io.sim.world import cabinet, chair, pillar, shelf, table, wall
+from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
+from gmmap.mapping.submap import BuildOptions, build_submaps
+from gmmap.math.em import fit_gmm
 
 
 def yaw_matrix(yaw: float, t=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 from gmmap import Gmm, InvalidInputError
 from gmmap.cli import main
 from gmmap.eval.planner import astar, evaluate_scene, occupancy_grid, shortcut
-from gmmap.planner import GradientPlanner, OccupancyField, PlannerOptions, plan
+from gmmap.mapping.planner import GradientPlanner, OccupancyField, PlannerOptions, plan
 
 RADIUS = PlannerOptions().robot_radius
 

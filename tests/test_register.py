@@ -5,7 +5,7 @@ import pytest
 
 import gmmap
 from gmmap import Gmm, InvalidInputError, fit_gmm, register
-from gmmap.register import confidence
+from gmmap.math.register import confidence
 
 
 def rigid(yaw: float, t, roll: float = 0.0) -> np.ndarray:
@@ -83,7 +83,7 @@ def test_eval_registration_command_prints_table_one(tmp_path):
     from click.testing import CliRunner
 
     from gmmap.cli import main
-    from gmmap.datasets import BUNDLED_TUM_SLICE
+    from gmmap.io.datasets import BUNDLED_TUM_SLICE
 
     args = [
         "eval",
@@ -122,8 +122,8 @@ def test_global_mode_recovers_random_perturbations(slice_points):
 def test_table_one_on_fr3_cabinet_beats_gicp_from_odometry(shared_data):
     """From odometry the harness registers at the mixtures' own resolution: a widened first
     step let the floor's camera-fixed footprint pull every pair 10–13 cm / 5–7° off."""
-    from gmmap import datasets
     from gmmap.eval.registration import evaluate_registration
+    from gmmap.io import datasets
 
     frames = datasets.open(
         shared_data / "tum_fr3_cabinet_keyframes", stride=4, drift=datasets.Drift(translation=0.05)

@@ -9,13 +9,13 @@ import time
 import numpy as np
 import pytest
 
-from gmmap.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.eval.registration import pose_errors
-from gmmap.place import PlaceOptions
-from gmmap.robot import RobotConfig, RobotNode
-from gmmap.store import Store
-from gmmap.submap import BuildOptions
-from gmmap.transport import free_port
+from gmmap.fleet.robot import RobotConfig, RobotNode
+from gmmap.fleet.store import Store
+from gmmap.fleet.transport import free_port
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.mapping.place import PlaceOptions
+from gmmap.mapping.submap import BuildOptions
 
 SLICE_BUILD = BuildOptions(frames_per_submap=2, covariance="full", n_components=60)
 # Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.

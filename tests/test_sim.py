@@ -4,11 +4,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import gmmap.datasets as datasets
+import gmmap.io.datasets as datasets
 from gmmap import FileFormatError, InvalidInputError, _core
 from gmmap.cli import main
-from gmmap.datasets.drift import Drift
-from gmmap.sim import (
+from gmmap.io.sim import (
     WORLDS,
     Box,
     Cylinder,
@@ -21,6 +20,7 @@ from gmmap.sim import (
     write_pointfiles,
     write_run,
 )
+from gmmap.math.drift import Drift
 
 SMALL_CAMERA = DepthCamera(width=160, height=120, fx=131.25, fy=131.25, cx=79.5, cy=59.5)
 SMALL_LIDAR = Lidar(beams=8, azimuth_steps=256)

@@ -6,10 +6,9 @@ from click.testing import CliRunner
 
 from gmmap import Gmm, InvalidInputError, fit_gmm
 from gmmap.cli import main
-from gmmap.datasets import Frame
-from gmmap.select import SelectOptions, select_components
-from gmmap.sim import DepthCamera, get_world, simulate
-from gmmap.submap import (
+from gmmap.io.datasets import Frame
+from gmmap.io.sim import DepthCamera, get_world, simulate
+from gmmap.mapping.submap import (
     BuildOptions,
     Submap,
     SubmapBuilder,
@@ -18,6 +17,7 @@ from gmmap.submap import (
     read_submaps,
     write_submaps,
 )
+from gmmap.math.select import SelectOptions, select_components
 
 MERGE_ALL = SelectOptions(kl_threshold=1e12, max_distance=100.0)
 FLOOR = np.diag([0.04, 0.04, 1e-4])
@@ -56,7 +56,7 @@ def test_nothing_merges_across_classes():
 
 
 def test_selection_then_refit_shrinks_a_real_submap(slice_points):
-    from gmmap.submap import select_and_refine
+    from gmmap.mapping.submap import select_and_refine
 
     fitted = fit_gmm(slice_points, 100)
     merged = select_components(fitted)
@@ -159,7 +159,7 @@ def test_submaps_round_trip_through_files(sim_frames, tmp_path):
 
 
 def test_build_command_json(tmp_path):
-    from gmmap.datasets import BUNDLED_TUM_SLICE
+    from gmmap.io.datasets import BUNDLED_TUM_SLICE
 
     r = CliRunner().invoke(
         main,

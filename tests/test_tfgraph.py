@@ -3,10 +3,10 @@ import itertools
 import numpy as np
 import pytest
 
-from gmmap.backend import BackendOptions, PoseGraph
-from gmmap.datasets.geometry import invert, so3_exp
 from gmmap.errors import InvalidInputError
-from gmmap.tfgraph import TfGraph
+from gmmap.mapping.backend import BackendOptions, PoseGraph
+from gmmap.mapping.tfgraph import TfGraph
+from gmmap.math.geometry import invert, so3_exp
 
 
 def random_pose(rng: np.random.Generator, scale: float = 5.0) -> np.ndarray:

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from gmmap.store import Store
-from gmmap.transport import (
+from gmmap.fleet.store import Store
+from gmmap.fleet.transport import (
     Transport,
     TransportConfig,
     TransportConfigError,

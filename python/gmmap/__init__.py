@@ -2,8 +2,6 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
-from gmmap.codec import decode, encode
-from gmmap.em import fit_gmm
 from gmmap.errors import (
     DecodeError,
     FileFormatError,
@@ -11,10 +9,12 @@ from gmmap.errors import (
     InvalidGmmError,
     InvalidInputError,
 )
-from gmmap.gmm import FitInfo, Gmm
-from gmmap.points import voxel_filter
-from gmmap.register import Registration, register
-from gmmap.select import SelectOptions, select_components
+from gmmap.fleet.codec import decode, encode
+from gmmap.math.em import fit_gmm
+from gmmap.math.gmm import FitInfo, Gmm
+from gmmap.math.points import voxel_filter
+from gmmap.math.register import Registration, register
+from gmmap.math.select import SelectOptions, select_components
 
 try:
     __version__ = version("gmmap")

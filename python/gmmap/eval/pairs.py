@@ -24,8 +24,8 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from gmmap.datasets.geometry import invert
 from gmmap.eval.registration import error_summary, pose_errors
+from gmmap.math.geometry import invert
 
 Node = tuple[str, int]
 

@@ -26,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gmmap.datasets.geometry import invert
 from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import pose_errors
-from gmmap.place import PlaceDatabase, PlaceOptions, ShapeDescriptor
-from gmmap.submap import BuildOptions, Submap, build_submaps
+from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor
+from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
+from gmmap.math.geometry import invert
 
 CORRECT_M, CORRECT_DEG = 0.2, 3.0
 RECALL_N = 25
@@ -254,8 +254,8 @@ def sim_place_set(
 ) -> PlaceSet:
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
     "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
-    from gmmap.datasets.drift import Drift
-    from gmmap.sim import UP, get_world, robot_sensor, simulate
+    from gmmap.io.sim import UP, get_world, robot_sensor, simulate
+    from gmmap.math.drift import Drift
 
     device = robot_sensor(sensor)
     run = simulate(

@@ -24,11 +24,11 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from gmmap.errors import InvalidInputError
-from gmmap.globalmap import build_global_map
-from gmmap.gmm import Gmm
-from gmmap.planner import OccupancyField, PlannerOptions, PlanResult, plan
-from gmmap.sim.world import World
-from gmmap.submap import BuildOptions, build_submaps
+from gmmap.io.sim.world import World
+from gmmap.mapping.globalmap import build_global_map
+from gmmap.mapping.planner import OccupancyField, PlannerOptions, PlanResult, plan
+from gmmap.mapping.submap import BuildOptions, build_submaps
+from gmmap.math.gmm import Gmm
 
 SCENES = ("corner", "passage", "clutter", "front-obstacle")
 Progress = Callable[[str], None]
@@ -50,7 +50,7 @@ def map_scene(
     """Drives the scene's route with the default LiDAR and builds the GMM map: full
     covariances and 200 components per submap (a LiDAR submap spans a whole room; with 100,
     one Gaussian per box covers the gap beside it, and wall ends come out short)."""
-    from gmmap.sim import Lidar, simulate
+    from gmmap.io.sim import Lidar, simulate
 
     (robot,) = simulate(world, robots=1, seed=seed, sensor=Lidar())
     frames = list(robot)
@@ -192,7 +192,7 @@ def evaluate_scene(
     name: str, options: PlannerOptions | None = None, seed: int = 0, n_components: int = 200
 ) -> tuple[dict, dict]:
     """Scores both planners on one scene; returns (scores, what a plot needs)."""
-    from gmmap.sim import get_world
+    from gmmap.io.sim import get_world
 
     options = options or PlannerOptions()
     world = get_world(name)

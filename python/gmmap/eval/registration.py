@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.register import register
-from gmmap.submap import BuildOptions, Submap, build_submaps
+from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
+from gmmap.math.register import register
 
 METHODS = ("points", "gmm-merge", "per-frame", "gicp")
 SUCCESS_M, SUCCESS_DEG = 0.05, 2.0

@@ -1,0 +1,27 @@
+"""The multi-robot simulator: worlds of primitives, ray-cast sensors, robots with odometry."""
+
+from gmmap.io.sim.robots import Motion, route_poses
+from gmmap.io.sim.run import UP, SimRobot, simulate, write_pointfiles, write_run, write_tum
+from gmmap.io.sim.sensors import ROBOT_SENSORS, DepthCamera, Lidar, robot_sensor
+from gmmap.io.sim.world import Box, Cylinder, World
+from gmmap.io.sim.worlds import WORLDS, get_world
+
+__all__ = [
+    "ROBOT_SENSORS",
+    "UP",
+    "WORLDS",
+    "Box",
+    "Cylinder",
+    "DepthCamera",
+    "Lidar",
+    "Motion",
+    "SimRobot",
+    "World",
+    "get_world",
+    "robot_sensor",
+    "route_poses",
+    "simulate",
+    "write_pointfiles",
+    "write_run",
+    "write_tum",
+]

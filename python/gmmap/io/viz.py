@@ -1,0 +1,68 @@
+"""Rerun recordings of a merged map (the optional ``viz`` extra: ``pip install 'gmmap[viz]'``).
+
+A recording holds, in the reference robot's map frame (z up): points sampled from the map,
+each component as its 2-sigma ellipsoid, and every robot's trajectory of submap anchors. Open
+it with ``rerun map.rrd``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gmmap.errors import GmmapError
+from gmmap.mapping.globalmap import GlobalMap
+
+
+def available() -> bool:
+    """Whether the Rerun SDK is installed."""
+    return importlib.util.find_spec("rerun") is not None
+
+
+def save_rerun(
+    gmap: GlobalMap, path: str | os.PathLike, n_points: int = 100_000, sigmas: float = 2.0
+) -> Path:
+    """Writes ``gmap`` as a Rerun recording (.rrd) at ``path``."""
+    if not available():
+        raise GmmapError("Rerun is not installed: pip install 'gmmap[viz]' (rerun-sdk)")
+    import rerun as rr
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(f"gmmap-{gmap.reference}")  # rerun warns of "/" in an id
+    rec.save(str(path))
+    rec.log("map", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    points = gmap.sample(n_points)
+    rec.log("map/points", rr.Points3D(points, colors=_height_colours(points[:, 2])), static=True)
+    eigval, eigvec = np.linalg.eigh(gmap.gmm.covariances)
+    eigvec[np.linalg.det(eigvec) < 0, :, 0] *= -1  # a rotation, not a reflection
+    quaternions = Rotation.from_matrix(eigvec).as_quat()  # x, y, z, w
+    rec.log(
+        "map/components",
+        rr.Ellipsoids3D(
+            centers=gmap.gmm.means,
+            half_sizes=sigmas * np.sqrt(np.maximum(eigval, 0)),
+            quaternions=[rr.Quaternion(xyzw=q) for q in quaternions],
+        ),
+        static=True,
+    )
+    for robot, trajectory in gmap.trajectories.items():
+        rec.log(
+            f"map/trajectories/{robot}",
+            rr.LineStrips3D([trajectory], labels=[robot]),
+            static=True,
+        )
+    rec.flush()
+    return path
+
+
+def _height_colours(z: np.ndarray) -> np.ndarray:
+    """Blue (low) to yellow (high) over the 2nd-98th percentile of heights."""
+    lo, hi = np.percentile(z, [2, 98]) if len(z) else (0.0, 1.0)
+    t = np.clip((z - lo) / max(hi - lo, 1e-9), 0, 1)[:, None]
+    low, high = np.array([40, 60, 200]), np.array([250, 220, 40])
+    return (low + t * (high - low)).astype(np.uint8)

@@ -1,0 +1,240 @@
+"""The GMM gradient-field local planner (paper V-C): navigation directly on a GMM map.
+
+The map becomes a smooth 2D occupancy field over the robot's height band. Each component k
+contributes a_k(x) = m_k exp(-d_k(x)^2 / 2): m_k in [0, 1] is how much of the component lies
+inside the band (a floor or a ceiling component contributes nothing), and d_k is a Mahalanobis
+distance scaled so that a_k equals ``max_occupancy`` a robot radius outside the surface the
+component covers, grown by the robot radius and a safety margin (its footprint).
+Components combine by a smooth maximum, o = (sum_k a_k^8)^(1/8): about 1 on a surface, 0 in
+free space, independent of the map's size and weights, with an analytic gradient.
+
+The paper's rule, replanned at every step: move towards the goal if the directional gradient
+g(r) = grad o . r is under g_thr; otherwise try goal +-30 deg, +-60 deg, ... (12 directions).
+Two additions make it usable: a step is refused if it would enter occupancy above
+``max_occupancy`` (the rule alone bounds the slope, not the distance), and while the goal
+direction stays refused the robot keeps to the side (left or right) it chose first, so it
+follows an obstacle round instead of dithering in front of it. A run ends ``reached``, or
+``stuck`` when no direction is allowed or the robot has not got closer to the goal for
+``stuck_window`` steps (an unreachable goal ends, it does not loop).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+from gmmap.errors import InvalidInputError
+from gmmap.math.gmm import Gmm
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Robot size and the planner's rule. Heights are in the map frame (floor at z = 0)."""
+
+    robot_radius: float = 0.2
+    margin: float = 0.05  # kept beyond the radius (the A* baseline inflates by one 5 cm cell)
+    z_band: tuple[float, float] = (0.05, 1.2)  # heights the robot's body occupies
+    step: float = 0.1  # metres per step
+    g_thr: float = 1.5  # directional gradient threshold (occupancy per metre)
+    min_support: float = 0.05  # density, relative to the map's median, of a full obstacle
+    max_occupancy: float = 0.5  # the level at radius + margin from a surface; never entered
+    goal_tolerance: float = 0.15
+    directions: int = 12
+    max_steps: int = 2000
+    stuck_window: int = 80  # steps without progress towards the goal before giving up
+
+    def __post_init__(self) -> None:
+        if not (self.robot_radius > 0 and self.step > 0 and self.goal_tolerance > 0):
+            raise InvalidInputError("robot_radius, step and goal_tolerance must be positive")
+        if self.z_band[1] <= self.z_band[0]:
+            raise InvalidInputError(f"z_band must be (low, high), got {self.z_band}")
+        if self.directions < 4 or self.directions % 2:
+            raise InvalidInputError("directions must be an even number >= 4")
+        if not 0 < self.max_occupancy < 1:
+            raise InvalidInputError("max_occupancy must be in (0, 1)")
+
+
+# Components combine by a smooth maximum (a p-norm): o is about the largest a_k, so the faint
+# tails of many components do not add up to close a doorway, as a sum or a product would.
+SOFTMAX_POWER = 8
+
+
+class OccupancyField:
+    """The occupancy o(x) of a GMM map over a height band, and its analytic gradient, at
+    (N, 2) horizontal positions."""
+
+    def __init__(self, gmm: Gmm, options: PlannerOptions | None = None) -> None:
+        self.options = options or PlannerOptions()
+        mass = _band_mass(gmm.means[:, 2], gmm.covariances[:, 2, 2], self.options.z_band)
+        mass *= _support(gmm, mass > 1e-3, self.options.min_support)
+        keep = mass > 1e-3
+        self.mass = mass[keep]
+        self.means = gmm.means[keep, :2].copy()
+        self.precisions = _footprints(
+            gmm.covariances[keep][:, :2, :2],
+            self.options.robot_radius + self.options.margin,
+            self.options.max_occupancy,
+        )
+
+    def __len__(self) -> int:
+        return len(self.mass)
+
+    def _terms(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = xy[:, None, :] - self.means[None]
+        pd = np.einsum("kij,nkj->nki", self.precisions, d)
+        return self.mass * np.exp(-0.5 * np.einsum("nki,nki->nk", d, pd)), pd
+
+    def occupancy(self, xy: object) -> np.ndarray:
+        return self.gradient(xy)[0]
+
+    def gradient(self, xy: object) -> tuple[np.ndarray, np.ndarray]:
+        """(occupancy (N,), gradient (N, 2)) with o = (sum_k a_k^p)^(1/p) and
+        d o = o^(1-p) sum_k a_k^(p-1) d a_k, where d a_k = -a_k P_k (x - mu_k)."""
+        xy = _as_xy(xy)
+        if not len(self):
+            return np.zeros(len(xy)), np.zeros((len(xy), 2))
+        a, pd = self._terms(xy)
+        # Scaled by the largest term: far from every surface the a_k^p underflow to zero.
+        top = a.max(axis=1, keepdims=True)
+        r = np.divide(a, top, out=np.zeros_like(a), where=top > 0)
+        s = (r**SOFTMAX_POWER).sum(axis=1, keepdims=True) ** (1 / SOFTMAX_POWER)
+        s = np.where(s > 0, s, 1.0)
+        weight = a * (r / s) ** (SOFTMAX_POWER - 1)  # d o / d a_k = (a_k / o)^(p-1)
+        return (top * s)[:, 0], -(weight[..., None] * pd).sum(axis=1)
+
+
+def _footprints(cov: np.ndarray, radius: float, level: float) -> np.ndarray:
+    """Precisions of Gaussians whose ``level`` set is each component's horizontal extent grown
+    by ``radius``: along each principal axis the extent of a uniform segment with the
+    component's spread (sqrt(3) sigma) plus the radius. A plain Gaussian fades before a
+    surface ends, so a robot would clip wall ends and corners."""
+    eigval, eigvec = np.linalg.eigh(cov)
+    semi = np.sqrt(3 * np.maximum(eigval, 0)) + radius
+    scale = 2 * math.log(1 / level)  # exp(-scale / 2) == level on the grown extent
+    return np.einsum("kij,kj,klj->kil", eigvec, scale / semi**2, eigvec)
+
+
+def _support(gmm: Gmm, in_band: np.ndarray, min_support: float) -> np.ndarray:
+    """Each component's peak density relative to ``min_support`` times the median of the
+    band's components, capped at 1. EM sometimes spans the free space between two objects with
+    one broad, light component; its density is orders of magnitude under a surface's, and it
+    must not close the gap between them."""
+    peak = gmm.weights / np.sqrt(np.linalg.det(gmm.covariances))
+    if not in_band.any() or min_support <= 0:
+        return np.ones(len(gmm))
+    return np.minimum(1.0, peak / (min_support * np.median(peak[in_band])))
+
+
+def _band_mass(mu_z: np.ndarray, var_z: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """How much of each component's height distribution lies in the band, relative to the most
+    a distribution of that spread could put there (so a tall wall component counts fully)."""
+    sd = np.sqrt(np.maximum(var_z, 1e-12))
+    inside = ndtr((band[1] - mu_z) / sd) - ndtr((band[0] - mu_z) / sd)
+    best = 2 * ndtr(0.5 * (band[1] - band[0]) / sd) - 1
+    return np.clip(inside / np.maximum(best, 1e-12), 0.0, 1.0)
+
+
+def _as_xy(xy: object) -> np.ndarray:
+    arr = np.atleast_2d(np.asarray(xy, dtype=np.float64))
+    if arr.shape[1] != 2 or not np.isfinite(arr).all():
+        raise InvalidInputError(f"positions must be finite (N, 2), got shape {arr.shape}")
+    return arr
+
+
+@dataclass
+class PlanResult:
+    """A run of the planner: the positions visited (start first), how it ended, and timing."""
+
+    path: np.ndarray
+    status: str  # "reached" or "stuck"
+    steps: int
+    time_per_step_s: float
+    reason: str = ""
+
+    @property
+    def success(self) -> bool:
+        return self.status == "reached"
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(np.diff(self.path, axis=0), axis=1).sum())
+
+
+class GradientPlanner:
+    """Plans on a GMM map (map frame) from a start to a goal, one step at a time."""
+
+    def __init__(self, gmm: Gmm, options: PlannerOptions | None = None) -> None:
+        self.options = options or PlannerOptions()
+        self.field = OccupancyField(gmm, self.options)
+        step = 2 * math.pi / self.options.directions
+        half = self.options.directions // 2
+        # Offsets from the goal direction in the paper's order: 0, +-1, +-2, ... sectors.
+        offsets = [(0, 0)] + [(k, s) for k in range(1, half) for s in (1, -1)] + [(half, 1)]
+        self._offsets = np.array(offsets)
+        self._sector = step
+        self._side = 0  # the side (+1 left, -1 right) followed round an obstacle; 0: none
+
+    def choose(self, position: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        """The unit direction of the next step, or None when every direction is refused."""
+        opt = self.options
+        heading = math.atan2(goal[1] - position[1], goal[0] - position[0])
+        step = min(opt.step, float(np.linalg.norm(goal - position)))
+        _, grad = self.field.gradient(position)
+        angles = heading + self._offsets[:, 0] * self._offsets[:, 1] * self._sector
+        dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        slope = dirs @ grad[0]
+        allowed = (slope < opt.g_thr) & (
+            self.field.occupancy(position + step * dirs) < opt.max_occupancy
+        )
+        k, side = self._offsets[:, 0], self._offsets[:, 1]
+        # Committed to a side: the goal, then round that side, then the other; otherwise the
+        # paper's order, the gentler slope first at equal angles.
+        keys = (k, side != self._side, k > 0) if self._side else (slope, k)
+        order = np.lexsort(keys)
+        for i in order:
+            if allowed[i]:
+                self._side = int(side[i]) if k[i] else 0
+                return dirs[i]
+        return None
+
+    def plan(self, start: object, goal: object) -> PlanResult:
+        """Steps from ``start`` until the goal is within tolerance or the robot is stuck."""
+        opt = self.options
+        position = _as_xy(start)[0].copy()
+        goal_xy = _as_xy(goal)[0]
+        path = [position.copy()]
+        best, since_best = math.inf, 0
+        status, reason = "stuck", f"no arrival within {opt.max_steps} steps"
+        t0 = time.perf_counter()
+        for _ in range(opt.max_steps):
+            dist = float(np.linalg.norm(goal_xy - position))
+            if dist <= opt.goal_tolerance:
+                status, reason = "reached", ""
+                break
+            if dist < best - 1e-3:
+                best, since_best = dist, 0
+            else:
+                since_best += 1
+                if since_best > opt.stuck_window:
+                    reason = f"no progress towards the goal for {opt.stuck_window} steps"
+                    break
+            direction = self.choose(position, goal_xy)
+            if direction is None:
+                reason = "every direction is blocked"
+                break
+            position = position + min(opt.step, dist) * direction
+            path.append(position.copy())
+        steps = len(path) - 1
+        elapsed = time.perf_counter() - t0
+        return PlanResult(np.array(path), status, steps, elapsed / max(steps, 1), reason)
+
+
+def plan(
+    gmm: Gmm, start: object, goal: object, options: PlannerOptions | None = None
+) -> PlanResult:
+    """Plans from ``start`` to ``goal`` ((x, y), the map's frame) on a GMM map."""
+    return GradientPlanner(gmm, options).plan(start, goal)

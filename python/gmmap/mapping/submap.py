@@ -1,0 +1,318 @@
+"""GMM submaps (paper IV-A): frames gathered in a point buffer, one mixture per submap.
+
+A `SubmapBuilder` (the paper's PtBuffer) moves each frame by its odometry pose into the
+submap's anchor frame (the first frame's pose, turned upright when the map frame's ``up`` is
+known) and adds it to a voxel buffer (exact centroids, 5 cm by default). A frame that would add
+too few new voxels (``min_novelty``) is skipped. After F accepted frames the submap is fitted
+and its components selected. Strategies:
+
+- ``points`` (the paper's Point-to-GMM, default): one GMM fitted to the buffered points.
+- ``gmm-merge`` (the earlier baseline): one GMM per frame with K / F components, the frames'
+  mixtures concatenated with equal weight per frame.
+- ``per-frame`` (no submap): every accepted frame becomes a submap of its own.
+
+Model selection (``gmmap.math.select``) then merges redundant components; for the strategies that fit
+points, ``refine_iter`` EM iterations with full covariances follow, started from the merged
+mixture. This goes beyond the paper: merging alone trades likelihood for size, while merging
+then refining keeps fewer components *and* fits better, because full covariances follow
+oblique surfaces that axis-aligned ones cannot.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field, is_dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gmmap import _core
+from gmmap.errors import InvalidInputError
+from gmmap.mapping.frame import Frame
+from gmmap.math.em import fit_gmm
+from gmmap.math.fileio import load_npz, save_npz
+from gmmap.math.gmm import Gmm
+from gmmap.math.points import voxel_filter
+from gmmap.math.select import SelectOptions, select_components
+
+STRATEGIES = ("points", "gmm-merge", "per-frame")
+FILE_FORMAT = "gmmap submap"
+FILE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """How submaps are built (see the module docstring)."""
+
+    frames_per_submap: int = 40
+    voxel_size: float = 0.05
+    strategy: str = "points"
+    n_components: int = 100
+    covariance: str = "diag"
+    min_novelty: float = 0.05  # fraction of a frame's voxels that must be new
+    select: bool = True
+    selection: SelectOptions = field(default_factory=SelectOptions)
+    refine_iter: int = 10  # EM iterations (full covariances) after selection; 0: none
+    holdout: float = 0.0  # fraction of buffered points withheld from fitting, for evaluation
+    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # map frame's up; None: no levelling
+    max_iter: int = 100
+    tol: float = 1e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise InvalidInputError(f"strategy must be one of {STRATEGIES}, got {self.strategy!r}")
+        if self.frames_per_submap < 1:
+            raise InvalidInputError("frames_per_submap must be >= 1")
+        if not 0.0 <= self.holdout < 1.0 or not 0.0 <= self.min_novelty <= 1.0:
+            raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
+
+
+@dataclass
+class Submap:
+    """One robot's submap: a GMM in its anchor frame, where the anchor sits in the robot's map.
+
+    ``points`` (the buffered voxel centroids, anchor frame) stay on the robot: they are for
+    baselines and evaluation and are never sent. ``gt_anchor`` is the anchor's ground-truth pose
+    in the dataset's world frame when the frames carry one.
+    """
+
+    robot: str
+    seq: int
+    anchor: np.ndarray
+    stamps: np.ndarray
+    n_points: int
+    gmm: Gmm
+    points: np.ndarray | None = None
+    gt_anchor: np.ndarray | None = None
+    stats: dict = field(default_factory=dict)
+
+    def save(self, path: str | os.PathLike, with_points: bool = True) -> None:
+        arrays = dict(
+            self.gmm.arrays(),
+            robot=np.array(self.robot),
+            seq=np.array(self.seq),
+            anchor=self.anchor,
+            stamps=self.stamps,
+            n_points=np.array(self.n_points),
+            stats=np.array(json.dumps(self.stats)),
+        )
+        if self.gt_anchor is not None:
+            arrays["gt_anchor"] = self.gt_anchor
+        if with_points and self.points is not None:
+            arrays["points"] = self.points.astype(np.float32)
+        save_npz(path, FILE_FORMAT, FILE_VERSION, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Submap:
+        d = load_npz(path, FILE_FORMAT, FILE_VERSION)
+        return cls(
+            str(d["robot"]),
+            int(d["seq"]),
+            d["anchor"],
+            d["stamps"],
+            int(d["n_points"]),
+            Gmm.from_arrays(d, path),
+            d.get("points"),
+            d.get("gt_anchor"),
+            json.loads(str(d["stats"])),
+        )
+
+
+def level(pose: np.ndarray, up: np.ndarray | None) -> np.ndarray:
+    """The pose turned so its z axis is ``up`` and its x axis the pose's most horizontal axis."""
+    if up is None:
+        return pose.copy()
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    R = pose[:3, :3]
+    forward = R[:, int(np.argmin(np.abs(R.T @ up)))]
+    x = forward - (forward @ up) * up
+    x /= np.linalg.norm(x)
+    out = pose.copy()
+    out[:3, :3] = np.column_stack([x, np.cross(up, x), up])
+    return out
+
+
+class SubmapBuilder:
+    """Turns frames into submaps: call ``add`` per frame, ``flush`` at the end."""
+
+    def __init__(self, robot: str = "robot", options: BuildOptions | None = None) -> None:
+        self.robot = robot
+        self.options = options or BuildOptions()
+        self.seq = 0
+        self.frames_seen = 0
+        self.frames_skipped = 0
+        self._reset()
+
+    def _reset(self) -> None:
+        self.buffer = _core.VoxelBuffer(self.options.voxel_size)
+        self.anchor: np.ndarray | None = None
+        self.gt_anchor: np.ndarray | None = None
+        self.stamps: list[float] = []
+        self.frame_gmms: list[Gmm] = []
+        self.busy_s = 0.0
+
+    @property
+    def frames_per_submap(self) -> int:
+        o = self.options
+        return 1 if o.strategy == "per-frame" else o.frames_per_submap
+
+    def add(self, frame: Frame) -> Submap | None:
+        """Adds a frame; returns a finished submap when this frame completes one."""
+        start = time.perf_counter()
+        self.frames_seen += 1
+        if self.anchor is None:
+            self.anchor = level(frame.pose, self.options.up)
+            if frame.gt_pose is not None:
+                self.gt_anchor = frame.gt_pose @ np.linalg.inv(frame.pose) @ self.anchor
+        T = np.linalg.inv(self.anchor) @ frame.pose
+        points = np.ascontiguousarray(frame.points, dtype=np.float32)
+        novelty = self.options.min_novelty if len(self.buffer) else 0.0
+        try:
+            _, _, accepted = self.buffer.offer(points, T, novelty)
+        except ValueError as exc:
+            raise InvalidInputError(f"frame at {frame.stamp}: {exc}") from exc
+        if not accepted:
+            self.frames_skipped += 1
+            self.busy_s += time.perf_counter() - start
+            return None
+        self.stamps.append(frame.stamp)
+        if self.options.strategy == "gmm-merge":
+            self.frame_gmms.append(self._fit_frame(points, T))
+        self.busy_s += time.perf_counter() - start
+        return self._emit() if len(self.stamps) >= self.frames_per_submap else None
+
+    def flush(self) -> Submap | None:
+        """The partial submap of the frames added since the last one (None if there are none)."""
+        return self._emit() if self.stamps else None
+
+    def _fit_frame(self, points: np.ndarray, T: np.ndarray) -> Gmm:
+        o = self.options
+        local = points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+        k = max(1, o.n_components // o.frames_per_submap)
+        return fit_gmm(
+            voxel_filter(local, o.voxel_size), k, o.covariance, o.max_iter, o.tol, o.seed
+        )
+
+    def _emit(self) -> Submap:
+        o = self.options
+        start = time.perf_counter()
+        points = self.buffer.centroids()
+        rng = np.random.default_rng([o.seed, self.seq])
+        held = rng.random(len(points)) < o.holdout
+        train = points[~held] if (~held).sum() >= 1 else points
+        if o.strategy == "gmm-merge":
+            gmm = concatenate(self.frame_gmms)
+        else:
+            gmm = fit_gmm(train, o.n_components, o.covariance, o.max_iter, o.tol, o.seed)
+        before = gmm
+        if o.select:
+            gmm = select_and_refine(gmm, train, o)
+        stats = {
+            "frames": len(self.stamps),
+            "points": len(points),
+            "components_before": len(before),
+            "components_after": len(gmm),
+            "bytes_float32": gmm.float32_bytes,
+            "time_s": self.busy_s + time.perf_counter() - start,
+        }
+        if held.any():
+            stats["heldout_ll_before"] = before.score(points[held])
+            stats["heldout_ll_after"] = gmm.score(points[held])
+        submap = Submap(
+            self.robot,
+            self.seq,
+            self.anchor,
+            np.array(self.stamps),
+            len(points),
+            gmm,
+            points,
+            self.gt_anchor,
+            stats,
+        )
+        self.seq += 1
+        self._reset()
+        return submap
+
+
+def select_and_refine(gmm: Gmm, points: np.ndarray, options: BuildOptions) -> Gmm:
+    """Model selection, then (for strategies that fit points) a few EM iterations with full
+    covariances from the merged mixture: the survivors re-fit the points they now cover, which
+    wins back what the merges cost (see benchmarks/selection.py). The refit is kept only when
+    it takes no more bytes than the fitted mixture (full covariances cost 3 floats more)."""
+    merged = select_components(gmm, options.selection)
+    if options.refine_iter == 0 or options.strategy == "gmm-merge":
+        return merged
+    refined = fit_gmm(
+        points, covariance="full", max_iter=options.refine_iter, tol=options.tol, init=merged
+    )
+    # Full covariances cost 3 floats more each: keep the refit only if it is no larger.
+    return refined if refined.float32_bytes <= gmm.float32_bytes else merged
+
+
+def concatenate(gmms: Sequence[Gmm], shares: Sequence[float] | None = None) -> Gmm:
+    """Mixtures joined, each with total weight proportional to its share (default: equal, the
+    GMM-merge baseline's normalisation)."""
+    shares = np.ones(len(gmms)) if shares is None else np.asarray(shares, dtype=float)
+    w = np.concatenate([g.weights * share for g, share in zip(gmms, shares, strict=True)])
+    return Gmm(
+        w / w.sum(),
+        np.concatenate([g.means for g in gmms]),
+        np.concatenate([g.covariances for g in gmms]),
+    )
+
+
+def build_submaps(
+    frames: Iterable[Frame], robot: str = "robot", options: BuildOptions | None = None
+) -> Iterator[Submap]:
+    """Submaps of a frame sequence, the last partial one included."""
+    builder = SubmapBuilder(robot, options)
+    for frame in frames:
+        submap = builder.add(frame)
+        if submap is not None:
+            yield submap
+    last = builder.flush()
+    if last is not None:
+        yield last
+
+
+def submap_path(out: Path, seq: int) -> Path:
+    return out / f"submap_{seq:06d}.npz"
+
+
+def write_submaps(submaps: list[Submap], out: str | os.PathLike, **info: object) -> dict:
+    """Writes each submap (points included: the folder is the robot's own) and ``index.json``
+    with the robot's name, each submap's statistics and ``info``; returns the index."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for s in submaps:
+        s.save(submap_path(out, s.seq))
+    keys = (
+        "frames",
+        "points",
+        "components_before",
+        "components_after",
+        "bytes_float32",
+        "heldout_ll_before",
+        "heldout_ll_after",
+        "time_s",
+    )
+    index = {
+        "robot": submaps[0].robot if submaps else None,
+        **{k: (asdict(v) if is_dataclass(v) else v) for k, v in info.items()},
+        "submaps": [{"seq": s.seq, **{k: s.stats.get(k) for k in keys}} for s in submaps],
+    }
+    (out / "index.json").write_text(json.dumps(index, indent=1))
+    return index
+
+
+def read_submaps(folder: str | os.PathLike) -> list[Submap]:
+    """The submaps of a folder written by ``write_submaps``, in sequence order."""
+    folder = Path(folder)
+    if not (folder / "index.json").is_file():
+        raise FileNotFoundError(f"{folder}: no index.json (not a submap folder from gmmap build)")
+    index = json.loads((folder / "index.json").read_text())
+    return [Submap.load(submap_path(folder, s["seq"])) for s in index["submaps"]]
