@@ -346,12 +346,10 @@ def test_replayed_demo_updates_end_where_a_batch_solve_does() -> None:
     assert sorted(result.accepted) == sorted(cold.accepted)
 
 
-def test_unmatched_robot_and_low_confidence() -> None:
+def test_unmatched_robots_stay_apart() -> None:
     world = World({"a": 0, "b": 10})
-    pg = world.graph(BackendOptions(min_confidence=0.5))
-    pg.add_match(*world.true_match("a", "b", 4), INFO, confidence=0.2)
-    result = pg.optimize()
-    assert result.rejected == {0: "confidence"}
+    result = world.graph(BackendOptions()).optimize()
+    assert result.rejected == {}
     assert result.groups == [["a"], ["b"]]
     assert result.reference["b"] == "b"
     for r in ("a", "b"):

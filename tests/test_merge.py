@@ -8,11 +8,12 @@ from click.testing import CliRunner
 
 from conftest import BUNDLED_TUM_SLICE
 from gmmap.cli import main
+from gmmap.config import Config
 from gmmap.errors import InvalidInputError
+from gmmap.eval.merge import merge
 from gmmap.io.datasets.tum import TumRgbd
 from gmmap.mapping.backend import BackendOptions
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
-from gmmap.mapping.mapper import MergeOptions, merge
 from gmmap.mapping.place import PlaceOptions
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
 from gmmap.math.em import fit_gmm
@@ -74,17 +75,16 @@ def slice_robots():
 
 
 # Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
-SLICE_OPTIONS = MergeOptions(PlaceOptions(min_confidence=0.55))
+SLICE_CONFIG = Config(place=PlaceOptions(min_confidence=0.55))
 
 
 def test_merge_recovers_the_relative_frame(slice_robots):
-    result = merge(slice_robots, SLICE_OPTIONS)
-    report = result.report(slice_robots)
+    mapper, report = merge(slice_robots, SLICE_CONFIG)
     assert report["groups"] == [["a", "b"]]
     assert report["accepted_edges"] >= 1
     (pair,) = report["pairs"]
     assert pair["t_error"] < 0.05 and pair["r_error_deg"] < 2.0
-    assert set(result.maps) == {"a"}
+    assert set(mapper.global_maps()) == {"a"}
 
 
 def test_merge_cli_json(tmp_path, slice_robots):
@@ -121,14 +121,14 @@ def sim_robots():
 
 
 def test_injected_wrong_matches_are_rejected_and_change_nothing(sim_robots):
-    clean = merge(sim_robots).report(sim_robots)
+    _, clean = merge(sim_robots)
     assert clean["groups"] == [["robot_0", "robot_1"]]
     kept = clean["match_errors"]
     assert kept["n"] >= 3 and kept["t_median"] < 0.05 and kept["r_median_deg"] < 1.0
     # Rigidly aligned (the reference robot's own drift taken out), optimising helps.
     assert clean["ate_aligned_after_m"] < clean["ate_aligned_before_m"] < clean["ate_before_m"]
     # Two robots verify only a handful of matches: 40 % makes two of them wrong.
-    report = merge(sim_robots, MergeOptions(wrong_matches=0.4, seed=1)).report(sim_robots)
+    _, report = merge(sim_robots, wrong_matches=0.4, seed=1)
     wrong = report["injected_wrong"]
     assert wrong["n"] >= 2 and wrong["rejected"] == wrong["n"]
     assert report["groups"] == clean["groups"]
@@ -147,8 +147,7 @@ def test_fr1_xyz_halves_merge_to_three_centimetres(shared_data):
         name: list(build_submaps(frames[part], name, options))
         for name, part in (("first", slice(0, 398)), ("second", slice(398, None)))
     }
-    merged = merge(halves, MergeOptions(backend=BackendOptions.for_drift(0.002)))
-    report = merged.report(halves)
+    _, report = merge(halves, Config(backend=BackendOptions.for_drift(0.002)))
     (pair,) = report["pairs"]
     # Both halves' map frame is the motion-capture frame: the frame relation is the figure.
     assert pair["frame_t_error"] <= 0.03 and pair["frame_r_error_deg"] <= 1.0, pair

@@ -9,13 +9,14 @@ import time
 import numpy as np
 import pytest
 
+from gmmap.config import Config
 from gmmap.eval.registration import pose_errors
-from gmmap.fleet.robot import RobotConfig, RobotNode
+from gmmap.fleet.robot import RobotNode
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import free_port
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.mapping.place import PlaceOptions
-from gmmap.mapping.submap import BuildOptions
+from gmmap.options import BuildOptions, RobotOptions, TransportOptions
 
 SLICE_BUILD = BuildOptions(frames_per_submap=2, covariance="full", n_components=60)
 # Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
@@ -84,12 +85,13 @@ def frames():
     return TumRgbd(BUNDLED_TUM_SLICE, stride=2)
 
 
-def node(tmp_path, name, port, peers=(), fleet="f", **kw):
-    config = RobotConfig(
-        robot=name, fleet=fleet, store=tmp_path / f"{name}.db", port=port,
-        connect=tuple(f"tcp/127.0.0.1:{p}" for p in peers), build=SLICE_BUILD,
-        place=SLICE_PLACE, **kw,
-    )  # fmt: skip
+def node(tmp_path, name, port, peers=(), fleet="f"):
+    config = Config(
+        robot=RobotOptions(name=name, fleet=fleet, store=str(tmp_path / f"{name}.db")),
+        transport=TransportOptions(port=port, connect=[f"tcp/127.0.0.1:{p}" for p in peers]),
+        build=SLICE_BUILD,
+        place=SLICE_PLACE,
+    )
     return RobotNode(config)
 
 
@@ -124,7 +126,7 @@ def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, 
         assert wait(lambda: a.drain(5))
         assert a.store.seqs("a") == [0, 1] and a.frames_consumed == 4
         assert wait(lambda: b.store.seqs("a") == [0, 1])
-        assert wait(lambda: a.result is not None and a.result.groups == [["a", "b"]])
+        assert wait(lambda: a.mapper.result is not None and a.groups() == [["a", "b"]])
         before = len(a.store.edges())
         a.stop()
         a = node(tmp_path, "a", pa, [pb])  # a second restart re-judges nothing

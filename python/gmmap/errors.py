@@ -31,3 +31,11 @@ class TopicNotFoundError(InvalidInputError):
 
 class DecodeError(GmmapError, ValueError):
     """Bytes that are not a valid gmmap wire message (truncated, corrupt, foreign, hostile)."""
+
+
+class TransportError(GmmapError):
+    """The transport cannot do what was asked (session failed to open, already closed, …)."""
+
+
+class TransportConfigError(TransportError, ValueError):
+    """A bad transport configuration or argument (names, endpoints, sequence numbers, payloads)."""

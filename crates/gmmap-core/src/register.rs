@@ -24,6 +24,8 @@ use rayon::prelude::*;
 /// (2π)^(-3/2), the normaliser of a 3-D Gaussian without its determinant.
 const INV_2PI_15: f64 = 0.063_493_635_934_240_97;
 
+/// Every field is given by the caller: the defaults live in the Python configuration
+/// (`gmmap.options.RegisterOptions`), which passes each one.
 #[derive(Debug, Clone)]
 pub struct RegisterOptions {
     /// Standard deviations (same unit as the means) added to all covariances, coarse to fine.
@@ -45,6 +47,7 @@ pub struct RegisterOptions {
     pub confidence_scale: f64,
 }
 
+#[cfg(test)]
 impl Default for RegisterOptions {
     fn default() -> Self {
         RegisterOptions {

@@ -258,7 +258,7 @@ type RegisterOutput<'py> = (
 /// the best distinct solution's confidence).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale))]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale, tol, cutoff))]
 fn register_gmm<'py>(
     py: Python<'py>,
     source: (
@@ -279,6 +279,8 @@ fn register_gmm<'py>(
     yaw_starts: usize,
     information_scale: f64,
     confidence_scale: f64,
+    tol: f64,
+    cutoff: f64,
 ) -> PyResult<RegisterOutput<'py>> {
     let (f, g) = (
         gmm_of(source.0, source.1, source.2)?,
@@ -294,7 +296,8 @@ fn register_gmm<'py>(
         yaw_starts,
         information_scale,
         confidence_scale,
-        ..Default::default()
+        tol,
+        cutoff,
     };
     let r = in_pool(py, || register(&f, &g, init, yaw_hint, &opts)).map_err(value_error)?;
     let t = PyArray1::from_vec(py, r.transform.to_matrix().to_vec()).reshape([4, 4])?;

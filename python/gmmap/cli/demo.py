@@ -18,58 +18,63 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
+import click
 import numpy as np
 
+from gmmap.cli.common import as_json_option, config_option, log, setting, sim_settings
+from gmmap.config import Config
 from gmmap.eval.pairs import describe_pair, match_errors, pair_errors
 from gmmap.eval.registration import describe_match_errors
 from gmmap.fleet.transport import free_port
+from gmmap.options import SimOptions, drift_overrides
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
 
 
 def run_demo(
-    robots: int = 3,
-    world: str = "office",
-    seed: int = 0,
-    frames_per_submap: int = 20,
-    max_frames: int | None = None,
-    sensor: str = "lidar",
-    sim_width: int = 320,
-    drift: float = 0.02,
-    linger: float = 5.0,
-    out: Path | None = None,
-    log=print,
-    min_matches: int = 1,
+    config: Config, max_frames: int | None = None, out: Path | None = None, log=print
 ) -> dict:
+    """Runs ``config.sim.robots`` robot processes, each started with its own configuration
+    file (this tree with its name, store and endpoints), and summarises their reports."""
     start = time.perf_counter()
     if out is None:
         out = Path(tempfile.mkdtemp(prefix="gmmap-demo-"))
     out.mkdir(parents=True, exist_ok=True)
-    names = [f"robot_{i}" for i in range(robots)]
+    sim = config.sim
+    names = [f"robot_{i}" for i in range(sim.robots)]
     for name in names:  # a demo starts afresh: robots would resume from an earlier run's stores
         for stale in out.glob(f"{name}.sqlite*"):
             stale.unlink()
     ports = [free_port() for _ in names]
     fleet = f"demo{os.getpid()}"
+    config.save(out)
     procs = []
-    log(f"starting {robots} robot processes in {world} (fleet {fleet}, output {out})")
+    log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
+        own = replace(
+            config,
+            robot=replace(
+                config.robot,
+                name=name,
+                fleet=fleet,
+                store=str(out / f"{name}.sqlite"),
+                wait_for=tuple(n for n in names if n != name),
+            ),
+            transport=replace(
+                config.transport,
+                port=ports[i],
+                connect=tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i),
+            ),
+        )
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
-            "--id", name, "--fleet", fleet, "--sim", world, "--sim-index", str(i),
-            "--robots", str(robots), "--seed", str(seed), "--sensor", sensor,
-            "--sim-width", str(sim_width), "--sim-drift", str(drift),
-            # the pose graph's odometry noise follows the simulated drift (with a floor)
-            "--odometry-drift", str(max(drift, 0.001)), "--min-matches", str(min_matches),
-            "--port", str(ports[i]), "--store", str(out / f"{name}.sqlite"),
-            "--frames-per-submap", str(frames_per_submap), "--linger", str(linger),
-            "--report", str(out / f"{name}.json"), "--json",
+            "--config", str(own.save(out / f"{name}.yaml")), "--sim", "--sim-index", str(i),
+            "--report", str(out / f"{name}.json"), "--truth", str(out / f"{name}.truth.json"),
+            "--json",
         ]  # fmt: skip
-        for j, other in enumerate(names):
-            if j != i:
-                cmd += ["--peer", f"tcp/127.0.0.1:{ports[j]}", "--wait-for", other]
         if max_frames:
             cmd += ["--max-frames", str(max_frames)]
         if i == 0:  # the lowest name: the reference of whatever group it is in
@@ -86,7 +91,8 @@ def run_demo(
     if any(codes):
         raise RuntimeError(f"robot processes exited with {codes}; see the log above")
     reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
-    report = summarise(reports, world, robots, seed)
+    truth = {n: json.loads((out / f"{n}.truth.json").read_text()) for n in names}
+    report = summarise(reports, truth, sim)
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
     report["map_rrd"] = reports[names[0]].get("map_rrd")
@@ -120,16 +126,17 @@ def _relay(proc: subprocess.Popen, log) -> None:
     err.join(timeout=5)
 
 
-def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> dict:
-    """The demo's report from the robots' reports and the simulator's ground truth."""
-    from gmmap.io.sim import get_world, simulate
+def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOptions) -> dict:
+    """The demo's report from the robots' reports, their anchors' ground truth (``anchors``:
+    robot → seq → 4x4) and the simulator's map frames."""
+    from gmmap.io.sim import simulate_options
 
-    truth = {r.name: r.map_to_world for r in simulate(get_world(world), robots, seed)}
+    truth = {r.name: r.map_to_world for r in simulate_options(sim)}
     # The view of the robot that holds the most (ties: the lowest name): it has every match.
     view = max(sorted(reports), key=lambda n: sum(reports[n]["held"].values()))
     v = reports[view]
     groups = v["groups"]
-    truth_anchors, poses, kept = _anchors(reports, view)
+    truth_anchors, poses, kept = _anchors(reports, anchors, view)
     to_reference = {n: np.array(T) for n, T in v["to_reference"].items()}
     pairs = pair_errors(groups, reports, poses, truth_anchors, kept, to_reference, truth)
     subs = [s for r in reports.values() for s in r["submaps"] if s["points_float32"]]
@@ -137,8 +144,8 @@ def summarise(reports: dict[str, dict], world: str, robots: int, seed: int) -> d
     points = float(np.mean([s["points_float32"] for s in subs]))
     gmm = float(np.mean([s["gmm_float32"] for s in subs])) + DESCRIPTOR_BYTES
     return {
-        "robots": robots,
-        "world": world,
+        "robots": sim.robots,
+        "world": sim.world,
         "groups": groups,
         "view": view,
         "submaps": len(subs),
@@ -176,12 +183,10 @@ def _totals(reports: dict[str, dict], direction: str) -> dict:
     }
 
 
-def _anchors(reports: dict[str, dict], view: str):
+def _anchors(reports: dict[str, dict], anchors: dict[str, dict], view: str):
     """True anchors (every robot's own), ``view``'s optimised poses and its kept match nodes."""
     truth = {
-        (name, int(seq)): np.array(T)
-        for name, r in reports.items()
-        for seq, T in r.get("ground_truth", {}).items()
+        (name, int(seq)): np.array(T) for name, own in anchors.items() for seq, T in own.items()
     }
     poses = {(k.rsplit("/", 1)[0], int(k.rsplit("/", 1)[1])): np.array(P)
              for k, P in reports[view]["poses"].items()}  # fmt: skip
@@ -228,3 +233,38 @@ def format_report(r: dict) -> str:
     lines.append(f"output          {r['out']}")
     lines.append(f"wall time       {r['wall_s']:.1f} s")
     return "\n".join(lines)
+
+
+@click.command("demo")
+@sim_settings
+@setting(
+    "--min-matches",
+    "backend.min_matches",
+    "Consistent matches before two maps join.",
+    type=click.IntRange(min=1),
+)
+@setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
+@click.option("--max-frames", type=int, help="Use only each robot's first frames.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output folder (configs, stores, reports, map.png); default a new temporary folder.",
+)
+@config_option
+@as_json_option
+def command(max_frames: int | None, out: Path | None, config: Config, as_json: bool) -> None:
+    """Simulated robots as separate processes share GMM submaps over Zenoh and merge maps.
+
+    The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
+    unless the configuration sets the backend's odometry fields."""
+    config = _backend_follows_drift(config)
+    r = run_demo(config, max_frames, out, log)
+    click.echo(json.dumps(r) if as_json else format_report(r))
+
+
+def _backend_follows_drift(config: Config) -> Config:
+    b, default = config.backend, Config().backend
+    if any(getattr(b, k) != getattr(default, k) for k in drift_overrides(0.0)):
+        return config  # the configuration chose its odometry noise
+    drift = drift_overrides(max(config.sim.drift, 0.001))
+    return replace(config, backend=replace(config.backend, **drift))

@@ -36,22 +36,21 @@ arrival order, another answers fetch queries, so a slow provider never delays me
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import json
 import logging
 import queue
-import re
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from types import TracebackType
 from typing import Any
 
 import zenoh
 
-from gmmap.errors import GmmapError
+from gmmap.errors import TransportConfigError, TransportError
+from gmmap.options import NAME_RE, TransportOptions, check_name
 
 __all__ = [
     "ByteCount",
@@ -83,29 +82,17 @@ Roster = Callable[[], Iterable[str]]
 """``roster()`` → the robots whose messages are held."""
 
 
-class TransportError(GmmapError):
-    """The transport cannot do what was asked (session failed to open, already closed, …)."""
+@dataclass(frozen=True)
+class TransportConfig:
+    """A robot's name in its fleet and its transport options."""
 
+    fleet: str
+    robot: str
+    options: TransportOptions = field(default_factory=TransportOptions)
 
-class TransportConfigError(TransportError, ValueError):
-    """A bad transport configuration or argument (names, endpoints, sequence numbers, payloads)."""
-
-
-# Names become single key-expression chunks: no '/', no wildcards ('*', '$*'), no selector or
-# verbatim characters ('?', '#', '@'), nothing that needs escaping. Leading letter or digit.
-_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
-_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
-_OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
-_MODES = ("peer", "client")
-
-
-def _check_name(what: str, name: object) -> str:
-    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
-        raise TransportConfigError(
-            f"{what} must be 1-64 characters from [A-Za-z0-9_.-] starting with a letter or digit "
-            f"(no '/', '*', '?', '#', '@', '$' or spaces); got {name!r}"
-        )
-    return name
+    def __post_init__(self) -> None:
+        check_name("fleet", self.fleet)
+        check_name("robot", self.robot)
 
 
 def _check_seq(seq: object, what: str = "seq") -> int:
@@ -113,41 +100,6 @@ def _check_seq(seq: object, what: str = "seq") -> int:
     if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
         raise TransportConfigError(f"{what} must be an integer ≥ 0; got {seq!r}")
     return seq
-
-
-def _check_endpoint(endpoint: object, *, listen: bool) -> str:
-    """A Zenoh endpoint ``<protocol>/<address>[?metadata][#config]``; IP addresses need a port."""
-    if not isinstance(endpoint, str) or not endpoint or endpoint != endpoint.strip():
-        raise TransportConfigError(f"endpoint must be a non-empty string; got {endpoint!r}")
-    locator = re.split(r"[?#]", endpoint, maxsplit=1)[0]
-    protocol, sep, address = locator.partition("/")
-    if not sep or not address:
-        raise TransportConfigError(
-            f"endpoint {endpoint!r} is not <protocol>/<address> (e.g. tcp/127.0.0.1:7447)"
-        )
-    if protocol in _OTHER_PROTOCOLS:
-        return endpoint
-    if protocol not in _IP_PROTOCOLS:
-        raise TransportConfigError(
-            f"endpoint {endpoint!r}: unknown protocol {protocol!r} "
-            f"(one of {', '.join(_IP_PROTOCOLS + _OTHER_PROTOCOLS)})"
-        )
-    host, sep, port_text = address.rpartition(":")
-    if not sep or not host or not port_text.isdigit():
-        raise TransportConfigError(f"endpoint {endpoint!r}: address must be <host>:<port>")
-    port = int(port_text)
-    if not 0 <= port <= 65535 or (port == 0 and not listen):
-        raise TransportConfigError(f"endpoint {endpoint!r}: port {port} out of range")
-    if host.startswith("["):
-        if not host.endswith("]"):
-            raise TransportConfigError(f"endpoint {endpoint!r}: unbalanced '[' in IPv6 address")
-        try:
-            ipaddress.IPv6Address(host[1:-1])
-        except ValueError as err:
-            raise TransportConfigError(f"endpoint {endpoint!r}: {err}") from None
-    elif not re.fullmatch(r"[A-Za-z0-9.\-]+", host):
-        raise TransportConfigError(f"endpoint {endpoint!r}: bad host {host!r}")
-    return endpoint
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -173,60 +125,12 @@ def parse_data_key(key: str) -> tuple[str, str, str, int] | None:
     if len(parts) != 5 or parts[0] != PREFIX:
         return None
     _, fleet, robot, kind, seq_text = parts
-    if not all(_NAME_RE.fullmatch(name) for name in (fleet, robot, kind)):
+    if not all(NAME_RE.fullmatch(name) for name in (fleet, robot, kind)):
         return None
     # Canonical decimal only: "007" or "+7" would give two keys for one message.
     if not seq_text.isdigit() or str(int(seq_text)) != seq_text:
         return None
     return fleet, robot, kind, int(seq_text)
-
-
-@dataclass(frozen=True)
-class TransportConfig:
-    """Where a robot's Zenoh session listens and whom it connects to.
-
-    ``listen`` None means one loopback endpoint ``tcp/127.0.0.1:<port>``; ``port`` 0 picks a free
-    ephemeral port when the transport opens (see :attr:`Transport.listen_endpoints`). Multicast
-    scouting is off by default so that fleets on one network only meet through ``connect``
-    endpoints (Zenoh's gossip still lets peers of peers find each other). ``zenoh_options`` are
-    raw Zenoh configuration entries (``{"transport/link/tx/lease": 5000}``) applied last.
-    """
-
-    fleet: str
-    robot: str
-    listen: tuple[str, ...] | None = None
-    port: int = 0
-    connect: tuple[str, ...] = ()
-    mode: str = "peer"
-    multicast_scouting: bool = False
-    fetch_timeout: float = 2.0
-    zenoh_options: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        _check_name("fleet", self.fleet)
-        _check_name("robot", self.robot)
-        if self.mode not in _MODES:
-            raise TransportConfigError(f"mode must be one of {_MODES}; got {self.mode!r}")
-        if isinstance(self.port, bool) or not isinstance(self.port, int):
-            raise TransportConfigError(f"port must be an integer; got {self.port!r}")
-        if not 0 <= self.port <= 65535:
-            raise TransportConfigError(f"port must be in 0..65535; got {self.port}")
-        # Accept any sequence of strings but store tuples: the config stays immutable.
-        if self.listen is not None:
-            object.__setattr__(self, "listen", self._endpoints("listen", self.listen))
-        object.__setattr__(self, "connect", self._endpoints("connect", self.connect))
-        if self.mode == "client" and not self.connect:
-            raise TransportConfigError("mode 'client' needs at least one connect endpoint")
-        if not isinstance(self.fetch_timeout, (int, float)) or not self.fetch_timeout > 0:
-            raise TransportConfigError(f"fetch_timeout must be > 0 s; got {self.fetch_timeout!r}")
-        if not isinstance(self.zenoh_options, Mapping):
-            raise TransportConfigError("zenoh_options must be a mapping of key to value")
-
-    @staticmethod
-    def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
-        if isinstance(endpoints, str):
-            raise TransportConfigError(f"{what} must be a list of endpoints, not one string")
-        return tuple(_check_endpoint(e, listen=what == "listen") for e in endpoints)
 
 
 @dataclass
@@ -369,12 +273,12 @@ class Transport:
     def _zenoh_config(self) -> zenoh.Config:
         cfg = zenoh.Config()
         entries: dict[str, Any] = {
-            "mode": self.config.mode,
+            "mode": self.config.options.mode,
             "listen/endpoints": list(self.listen_endpoints),
-            "connect/endpoints": list(self.config.connect),
-            "scouting/multicast/enabled": self.config.multicast_scouting,
+            "connect/endpoints": list(self.config.options.connect),
+            "scouting/multicast/enabled": self.config.options.multicast_scouting,
         }
-        entries.update(self.config.zenoh_options)
+        entries.update(self.config.options.zenoh_options)
         for key, value in entries.items():
             try:
                 cfg.insert_json5(key, json.dumps(value))
@@ -384,12 +288,12 @@ class Transport:
 
     def _open_session(self) -> zenoh.Session:
         # A port we pick ourselves may be taken between free_port() and Zenoh's bind: retry.
-        attempts = 3 if self.config.listen is None and self.config.port == 0 else 1
+        attempts = 3 if self.config.options.listen is None and self.config.options.port == 0 else 1
         for attempt in range(attempts):
             self.listen_endpoints = (
-                self.config.listen
-                if self.config.listen is not None  # () listens nowhere (connects only)
-                else (f"tcp/127.0.0.1:{self.config.port or free_port()}",)
+                self.config.options.listen
+                if self.config.options.listen is not None  # () listens nowhere (connects only)
+                else (f"tcp/127.0.0.1:{self.config.options.port or free_port()}",)
             )
             try:
                 return zenoh.open(self._zenoh_config())
@@ -397,7 +301,8 @@ class Transport:
                 if attempt + 1 == attempts:
                     raise TransportError(
                         f"cannot open the Zenoh session of robot {self.robot!r} (listen "
-                        f"{list(self.listen_endpoints)}, connect {list(self.config.connect)}): "
+                        f"{list(self.listen_endpoints)}, connect "
+                        f"{list(self.config.options.connect)}): "
                         f"{err}"
                     ) from err
         raise AssertionError("unreachable")
@@ -444,7 +349,7 @@ class Transport:
         Reliable and blocking under congestion: a submap is never silently dropped on our side.
         """
         self._check_open()
-        _check_name("kind", kind)
+        check_name("kind", kind)
         _check_seq(seq)
         data = _as_bytes(payload)
         key = data_key(self.fleet, self.robot, kind, seq)
@@ -477,7 +382,7 @@ class Transport:
         """Whether some other session subscribes to this robot's messages of ``kind`` now (a
         publish before anyone listens is not stored by Zenoh: peers would fetch it later)."""
         self._check_open()
-        _check_name("kind", kind)
+        check_name("kind", kind)
         with self._declare_lock:
             probe = self._probes.get(kind)
             if probe is None:
@@ -553,7 +458,7 @@ class Transport:
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         parts = str(sample.key_expr).split("/")
-        if len(parts) != 3 or parts[1] != self.fleet or not _NAME_RE.fullmatch(parts[2]):
+        if len(parts) != 3 or parts[1] != self.fleet or not NAME_RE.fullmatch(parts[2]):
             return
         robot = parts[2]
         if robot == self.robot:
@@ -645,8 +550,8 @@ class Transport:
         returns what arrived by then; no peer serving gives an empty list.
         """
         self._check_open()
-        _check_name("robot", robot)
-        _check_name("kind", kind)
+        check_name("robot", robot)
+        check_name("kind", kind)
         _check_seq(since_seq, "since_seq")
         found = self._query(
             f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}",
@@ -662,8 +567,8 @@ class Transport:
         how a robot that joins late learns of robots that left before it came. Returns
         ``{robot: [(seq, payload)]}`` sorted by seq, the first reply per message winning."""
         self._check_open()
-        _check_name("kind", kind)
-        skip = sorted({_check_name("robot", r) for r in known})
+        check_name("kind", kind)
+        skip = sorted({check_name("robot", r) for r in known})
         found = self._query(
             f"{PREFIX}/{self.fleet}/*/{kind}/*?since=0;skip={','.join(skip)}",
             timeout,
@@ -682,7 +587,7 @@ class Transport:
     ) -> dict[tuple[str, int], bytes]:
         """Sends a fetch query and keeps the first reply per (robot, seq) whose key ``accept``
         takes, counting each as received."""
-        timeout = self.config.fetch_timeout if timeout is None else float(timeout)
+        timeout = self.config.options.fetch_timeout if timeout is None else float(timeout)
         if not timeout > 0:
             raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
         self._counters.bump("queries_sent")
@@ -737,7 +642,7 @@ def _parse_fetch(key: str, since: str | None) -> tuple[str, str, str, int] | Non
         return None
     _, fleet, robot, kind, _ = parts
     names = (fleet, kind) if robot == "*" else (fleet, robot, kind)
-    if not all(_NAME_RE.fullmatch(name) for name in names):
+    if not all(NAME_RE.fullmatch(name) for name in names):
         return None
     since_text = "0" if since is None else since
     if not since_text.isdigit():

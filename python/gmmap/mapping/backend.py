@@ -4,7 +4,7 @@ Nodes are submap anchors (robot, seq). Factors:
 
 * odometry: a BetweenFactor between consecutive submaps of a robot (by seq; a gap is bridged
   by the longer motion), measured from the anchors, with the drift model of
-  `gmmap.io.datasets.Drift` applied to the relative motion: per axis
+  `gmmap.math.drift.Drift` applied to the relative motion: per axis
   σₜ = translation·d + translation_floor, σᵣ = rotation_per_rad·θ + rotation_per_m·d +
   rotation_floor (d, θ: its length and angle). That model is per step; odometry integrated over F
   frames per submap has σ ≈ (model)/√F, so the defaults are conservative for real submaps.
@@ -49,86 +49,16 @@ import heapq
 import itertools
 import math
 import time
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.math.drift import Drift
 from gmmap.math.geometry import invert, rotation_angle
+from gmmap.options import BackendOptions
 
 Node = tuple[str, int]
-
-
-@dataclass(frozen=True)
-class BackendOptions:
-    """Noise models, robustness switches and thresholds of `PoseGraph` (see the module doc).
-
-    The odometry parameters mean what `Drift`'s do (defaults: Drift's defaults, floors > 0 so a
-    robot standing still still gives an invertible factor). A match's covariance gets the match
-    floors added in quadrature, because registration information (component counts as
-    independent measurements) is optimistic: the curvature says millimetres, while verified
-    cross-robot matches on real data are off by a median 2.7 cm / 0.95° (fr1_xyz halves). With
-    the floors at that accuracy every match counts about alike, and the merged frame of the
-    fr1_xyz halves comes to 2.3 cm / 1.0° instead of 3.8 cm / 1.5° with 1 cm / 0.3° floors.
-    """
-
-    translation: float = 0.02
-    translation_floor: float = 0.001
-    rotation_per_rad: float = 0.02
-    rotation_per_m: float = 0.005
-    rotation_floor: float = 0.001
-    match_sigma_translation: float = 0.05  # m, for a match given without information
-    match_sigma_rotation: float = 0.02  # rad, idem
-    match_floor_translation: float = 0.03
-    match_floor_rotation: float = 0.017
-    min_confidence: float = 0.0  # matches under it are rejected before anything else
-    pcm: bool = True
-    # χ² quantile of the pairwise test. Lenient on purpose: with m true matches between two
-    # robots about m²(1 − p)/2 true pairs fail and the clique loses up to one match per failed
-    # pair, while random wrong matches sit at d² in the thousands; GNC judges what passes.
-    pcm_probability: float = 0.999
-    pcm_exact_budget: int = 5_000  # branch-and-bound nodes per robot pair
-    # Two robots' maps join only once this many of their matches are mutually consistent;
-    # fewer are held back ("pending") until more arrive. 1 trusts a single match, which PCM
-    # cannot test; 2 stops a lone aliased match (a corridor seen end for end) from joining.
-    min_matches: int = 1
-    gnc: bool = True
-    gnc_probability: float = 0.99  # χ² quantile of GNC's inlier threshold
-    prior_sigma: float = 1e-4  # the reference prior (m and rad)
-    max_iterations: int = 100  # Levenberg-Marquardt, per GNC step
-
-    @classmethod
-    def for_drift(cls, drift: float, **options: Any) -> BackendOptions:
-        """Odometry noise of `Drift.per_metre` (drift), the other ``options`` as given: the
-        default 0.02 is `Drift`'s wheel odometry; motion-capture poses (TUM's ground truth)
-        are nearer 0.002."""
-        d = Drift.per_metre(drift)
-        return cls(
-            translation=d.translation,
-            rotation_per_rad=d.rotation_per_rad,
-            rotation_per_m=d.rotation_per_m,
-            **options,
-        )
-
-    def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if isinstance(value, bool):
-                continue
-            if not (math.isfinite(value) and value >= 0):
-                raise InvalidInputError(f"BackendOptions.{name} must be finite and >= 0")
-        for name in ("translation_floor", "rotation_floor", "prior_sigma"):
-            if getattr(self, name) <= 0:
-                raise InvalidInputError(f"BackendOptions.{name} must be > 0")
-        if int(self.min_matches) != self.min_matches or self.min_matches < 1:
-            raise InvalidInputError("BackendOptions.min_matches must be an integer >= 1")
-        for name in ("pcm_probability", "gnc_probability"):
-            if not 0 < getattr(self, name) < 1:
-                raise InvalidInputError(f"BackendOptions.{name} must be in (0, 1)")
-        if self.match_sigma_translation <= 0 or self.match_sigma_rotation <= 0:
-            raise InvalidInputError("BackendOptions.match_sigma_* must be > 0")
 
 
 @dataclass(frozen=True)
@@ -279,17 +209,12 @@ class PoseGraph:
 
     # -------------------------------------------------------------------------- optimise
     def optimize(self) -> BackendResult:
-        """Selects consistent matches (confidence, PCM), solves (GNC or LM) from the last
+        """Selects consistent matches (PCM), solves (GNC or LM) from the last
         estimate and returns poses, frames and the accepted/rejected edges."""
         start = time.perf_counter()
         o = self.options
         rejected: dict[int, str] = {}
-        candidates = []
-        for m in self._matches:
-            if m.confidence is not None and m.confidence < o.min_confidence:
-                rejected[m.id] = "confidence"
-            else:
-                candidates.append(m)
+        candidates = list(self._matches)
         t_pcm = time.perf_counter()
         exact = True
         if o.pcm:

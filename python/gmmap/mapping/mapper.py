@@ -1,76 +1,176 @@
-"""The offline multi-robot pipeline: submap folders in, relative frames and a global map out.
+"""The mapping pipeline: submaps in, matches, optimised poses, frames between robots and maps out.
 
-What each robot's node does online, run once over whole folders (e.g. from ``gmmap build``):
-place recognition between the robots' submaps (descriptors computed here, from the GMMs
-only), verification by registration, the robust pose graph, the TF graph, and a global map
-per connected group. Where the submaps carry ground truth, the recovered frames and the
-optimised trajectories are compared with it.
+One `Mapper` is what a robot node runs online and what ``gmmap merge`` runs over whole folders:
+it holds the submaps (own and received), describes them for place recognition (from the GMMs
+only), verifies each candidate pair once by registration, keeps the robust pose graph and,
+after `optimize`, the `TfGraph` of frames between robots and a global map per group. It never
+sees ground truth; evaluation compares its outputs with it from the outside (`gmmap.eval`).
+
+Matching is deterministic for a given set of held submaps: the submaps given to one `add` are
+all held first, then each queries the others in (robot, seq) order, and every pair is judged
+once, in the direction of the first query that found it. Fed the same submaps in one call, a
+robot node and an offline merge judge the same pairs alike and optimise the same graph. Live,
+submaps arrive one by one, so a pair is judged when the later of its two arrives.
+
+Thread safety: one lock guards the held state; registration (the slow part) runs outside it,
+so one thread can match while another optimises.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+import threading
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
+from gmmap.config import Config
 from gmmap.errors import InvalidInputError
-from gmmap.eval.pairs import match_errors, pair_errors
-from gmmap.mapping.backend import BackendOptions, BackendResult, PoseGraph
+from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
-from gmmap.mapping.place import Match, PlaceDatabase, PlaceOptions
+from gmmap.mapping.place import Candidate, Match, PlaceDatabase
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
-from gmmap.math.geometry import invert
-from gmmap.math.select import SelectOptions
 
+Node = tuple[str, int]
 Progress = Callable[[str], None]
 
 
-@dataclass
-class MergeOptions:
-    """``wrong_matches``: a robustness test: this fraction of the verified matches has its
-    transform replaced by a wrong one (a random yaw of 30-180° and 1-5 m, seeded by ``seed``),
-    with its confidence and information kept, before the backend sees them."""
+class Mapper:
+    """See the module docstring. ``config`` supplies the place, register, backend and select
+    sections."""
 
-    place: PlaceOptions = field(default_factory=PlaceOptions)
-    backend: BackendOptions = field(default_factory=BackendOptions)
-    selection: SelectOptions = field(default_factory=SelectOptions)
-    wrong_matches: float = 0.0
-    seed: int = 0
+    def __init__(self, config: Config | None = None) -> None:
+        self.config = config or Config()
+        self.db = PlaceDatabase(options=self.config.place, registration=self.config.register)
+        self.graph = PoseGraph(self.config.backend)
+        self.submaps: dict[Node, Submap] = {}
+        self.matches: list[Match] = []  # every pair judged here, accepted or not, in order
+        self.edge_matches: dict[int, Match] = {}  # backend edge id → the match it came from
+        self.result: BackendResult | None = None
+        self.frames = TfGraph()
+        self._judged: set[frozenset[Node]] = set()
+        self._lock = threading.Lock()
 
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.wrong_matches <= 1.0:
-            raise InvalidInputError(f"wrong_matches must be in [0, 1], got {self.wrong_matches}")
+    # ---- input ------------------------------------------------------------------------------
 
+    def add(self, submaps: Iterable[Submap], progress: Progress | None = None) -> list[Match]:
+        """Holds ``submaps`` and verifies their unjudged candidate pairs; the accepted matches
+        become pose-graph edges. Returns the new matches."""
+        new = self.hold(submaps)
+        matches = self.verify(new, progress)
+        for m in matches:
+            self.add_match(m)
+        return matches
 
-@dataclass
-class MergeResult:
-    matches: list[Match]  # every verified candidate, accepted by C_thr or not
-    backend: BackendResult
-    tf: TfGraph
-    maps: dict[str, GlobalMap]  # by reference robot
-    edge_ids: dict[int, Match]  # backend edge id → the match it came from
-    time_s: float
-    injected: list[int] = field(default_factory=list)  # edge ids of injected wrong matches
+    def hold(self, submaps: Iterable[Submap]) -> list[Submap]:
+        """Describes ``submaps`` and adds their anchors to the graph; returns those not yet
+        held, in (robot, seq) order."""
+        new = []
+        with self._lock:
+            for s in sorted(submaps, key=lambda s: (s.robot, s.seq)):
+                key = (s.robot, s.seq)
+                if key in self.submaps:
+                    continue
+                self.submaps[key] = s
+                self.db.add(s.robot, s.seq, s.gmm)
+                self.graph.add_submap(s.robot, s.seq, s.anchor)
+                new.append(s)
+        return new
 
-    def report(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
-        """The JSON report: frames, groups, edges and, with ground truth, the errors."""
-        b = self.backend
-        reference = min(self.tf.groups()[0]) if self.tf.groups() else min(submaps)
-        report: dict = {
-            "reference": reference,
+    def verify(self, submaps: Sequence[Submap], progress: Progress | None = None) -> list[Match]:
+        """Each of ``submaps`` queries the held submaps of other robots; each candidate pair not
+        judged before is registered (once) and judged. Adds no edges (see `add_match`)."""
+        matches = []
+        for i, s in enumerate(submaps):
+            for c in self._candidates(s):
+                matches.append(self.db.verify(s.robot, s.seq, s.gmm, c))
+            if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
+                accepted = sum(m.accepted for m in matches)
+                progress(f"place recognition: {i + 1}/{len(submaps)} submaps, {accepted} verified")
+        with self._lock:
+            self.matches.extend(matches)
+        return matches
+
+    def _candidates(self, s: Submap) -> list[Candidate]:
+        with self._lock:
+            found = self.db.query(s.robot, s.seq, s.gmm, others_only=True)
+            fresh = []
+            for c in found:
+                pair = frozenset({(s.robot, s.seq), (c.robot, c.seq)})
+                if pair not in self._judged:
+                    self._judged.add(pair)
+                    fresh.append(c)
+            return fresh
+
+    def add_match(self, m: Match) -> int | None:
+        """Adds an accepted match as a pose-graph edge (its id), or only records a rejected
+        one as judged (None). Both submaps must be held."""
+        target, source = (m.candidate.robot, m.candidate.seq), m.query
+        with self._lock:
+            self._judged.add(frozenset({target, source}))
+            if not m.accepted:
+                return None
+            if target not in self.submaps or source not in self.submaps:
+                raise InvalidInputError(f"match {source} → {target}: submap not held")
+            r = m.registration
+            edge = self.graph.add_match(target, source, r.transform, r.information, r.confidence)
+            self.edge_matches[edge] = m
+            return edge
+
+    # ---- output -----------------------------------------------------------------------------
+
+    def optimize(self) -> BackendResult:
+        """Solves the pose graph and refreshes the frames between robots."""
+        with self._lock:
+            if not self.submaps:
+                raise InvalidInputError("nothing to optimise: no submap held")
+            result = self.graph.optimize()
+            self.result, self.frames = result, TfGraph.from_result(result)
+        return result
+
+    def group_of(self, robot: str) -> list[str]:
+        return next((g for g in self.frames.groups() if robot in g), [robot])
+
+    def global_map(self, robot: str) -> GlobalMap | None:
+        """The merged map of ``robot``'s group in its reference frame (None before `optimize`)."""
+        result = self.result
+        if result is None:
+            return None
+        group = self.group_of(robot)
+        poses = {k: v for k, v in result.poses.items() if k[0] in group}
+        with self._lock:
+            held = [s for k, s in self.submaps.items() if k in poses]
+        return build_global_map(held, poses, self.frames.reference(group), self.config.select)
+
+    def global_maps(self, progress: Progress | None = None) -> dict[str, GlobalMap]:
+        """One global map per group, by its reference robot."""
+        maps = {}
+        for group in self.frames.groups():
+            if progress:
+                progress(f"merging the global map of {', '.join(group)}")
+            gmap = self.global_map(group[0])
+            if gmap is not None:
+                maps[gmap.reference] = gmap
+        return maps
+
+    def report(self) -> dict:
+        """Frames, groups and edge counts (no ground truth): what ``gmmap merge`` prints."""
+        b = self.result
+        if b is None:
+            raise InvalidInputError("report before optimize")
+        robots = sorted({r for r, _ in self.submaps})
+        return {
+            "reference": self.frames.reference(self.frames.groups()[0]),
             "robots": [
                 {
                     "name": r,
-                    "reference": b.reference[r],
-                    "to_reference": b.to_reference[r].tolist(),
-                    "submaps": len(submaps[r]),
+                    "reference": self.frames.reference(r),
+                    "to_reference": np.asarray(self.frames.to_reference(r)).tolist(),
+                    "submaps": sum(1 for x, _ in self.submaps if x == r),
                 }
-                for r in sorted(submaps)
+                for r in robots
             ],
-            "groups": b.groups,
+            "groups": self.frames.groups(),
             "candidates": len(self.matches),
             "verified": sum(m.accepted for m in self.matches),
             "accepted_edges": len(b.accepted),
@@ -79,154 +179,4 @@ class MergeResult:
                 why: list(b.rejected.values()).count(why) for why in {*b.rejected.values()}
             },
             "backend_time_s": b.time_s,
-            "time_s": self.time_s,
         }
-        if self.injected:
-            report["injected_wrong"] = {
-                "n": len(self.injected),
-                "rejected": sum(i in b.rejected for i in self.injected),
-            }
-        if all(s.gt_anchor is not None for subs in submaps.values() for s in subs):
-            report.update(truth_errors(submaps, b))
-            report["match_errors"] = self.match_errors(submaps)
-        return report
-
-    def match_errors(self, submaps: Mapping[str, Sequence[Submap]]) -> dict:
-        """Each match the backend kept against the anchors' ground truth, as registered and as
-        optimised (`gmmap.eval.pairs.match_errors`)."""
-        truth = {(s.robot, s.seq): s.gt_anchor for subs in submaps.values() for s in subs}
-        kept = [self.edge_ids[e] for e in self.backend.accepted]
-        registered = [
-            ((m.candidate.robot, m.candidate.seq), m.query, m.registration.transform) for m in kept
-        ]
-        nodes = [(t, s) for t, s, _ in registered]
-        return match_errors(registered, nodes, self.backend.poses, truth)
-
-
-def merge(
-    submaps: Mapping[str, Sequence[Submap]],
-    options: MergeOptions | None = None,
-    progress: Progress | None = None,
-) -> MergeResult:
-    """Runs the pipeline over ``submaps`` (robot name → its submaps)."""
-    options = options or MergeOptions()
-    say = progress or (lambda _m: None)
-    if len(submaps) < 1 or any(len(s) == 0 for s in submaps.values()):
-        raise InvalidInputError("merge needs at least one robot, each with submaps")
-    start = time.perf_counter()
-    say(f"describing {sum(map(len, submaps.values()))} submaps")
-    db = PlaceDatabase(options=options.place)
-    for subs in submaps.values():
-        for s in subs:
-            db.add(s.robot, s.seq, s.gmm)
-    matches = find_matches(db, submaps, say)
-    wrong = inject_wrong(matches, options.wrong_matches, options.seed)
-    graph = PoseGraph(options.backend)
-    for subs in submaps.values():
-        for s in sorted(subs, key=lambda s: s.seq):
-            graph.add_submap(s.robot, s.seq, s.anchor)
-    edge_ids, injected = {}, []
-    for i, m in enumerate(matches):
-        if m.accepted:
-            target = (m.candidate.robot, m.candidate.seq)
-            r = m.registration
-            edge = graph.add_match(target, m.query, r.transform, r.information, r.confidence)
-            edge_ids[edge] = m
-            if i in wrong:
-                injected.append(edge)
-    say(f"optimising the pose graph ({len(edge_ids)} inter-robot matches)")
-    result = graph.optimize()
-    tf = TfGraph.from_result(result)
-    everything = [s for subs in submaps.values() for s in subs]
-    maps = {}
-    for group in result.groups:
-        ref = result.reference[group[0]]
-        say(f"merging the global map of {', '.join(group)}")
-        poses = {k: v for k, v in result.poses.items() if k[0] in group}
-        maps[ref] = build_global_map(everything, poses, ref, options.selection)
-    elapsed = time.perf_counter() - start
-    return MergeResult(matches, result, tf, maps, edge_ids, elapsed, injected)
-
-
-def inject_wrong(matches: list[Match], fraction: float, seed: int) -> set[int]:
-    """Replaces the transform of ``fraction`` of the accepted matches (in place) by a wrong
-    one; returns their indices."""
-    accepted = [i for i, m in enumerate(matches) if m.accepted]
-    n = round(fraction * len(accepted))
-    if n == 0:
-        return set()
-    rng = np.random.default_rng(seed)
-    chosen = rng.choice(accepted, size=n, replace=False)
-    for i in chosen:
-        yaw = rng.uniform(np.pi / 6, np.pi) * rng.choice([-1, 1])
-        direction = rng.normal(size=2)
-        offset = np.eye(4)
-        offset[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
-        offset[:2, 3] = rng.uniform(1, 5) * direction / np.linalg.norm(direction)
-        r = matches[i].registration
-        matches[i] = replace(matches[i], registration=replace(r, transform=offset @ r.transform))
-    return {int(i) for i in chosen}
-
-
-def find_matches(
-    db: PlaceDatabase, submaps: Mapping[str, Sequence[Submap]], say: Progress
-) -> list[Match]:
-    """Each submap queries the other robots' submaps; every candidate pair is verified once."""
-    seen: set[frozenset] = set()
-    matches = []
-    queries = [s for subs in submaps.values() for s in subs]
-    for i, s in enumerate(queries):
-        for c in db.query(s.robot, s.seq, s.gmm, others_only=True):
-            pair = frozenset({(s.robot, s.seq), (c.robot, c.seq)})
-            if pair in seen:
-                continue
-            seen.add(pair)
-            matches.append(db.verify(s.robot, s.seq, s.gmm, c))
-        if (i + 1) % 10 == 0 or i + 1 == len(queries):
-            accepted = sum(m.accepted for m in matches)
-            say(f"place recognition: {i + 1}/{len(queries)} submaps, {accepted} matches verified")
-    return matches
-
-
-def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
-    """A robot's true map frame → world, from its first submap (odometry starts exact)."""
-    first = min(subs, key=lambda s: s.seq)
-    return first.gt_anchor @ invert(first.anchor)
-
-
-def truth_errors(submaps: Mapping[str, Sequence[Submap]], b: BackendResult) -> dict:
-    """Every robot pair's relative pose errors (`gmmap.eval.pairs`: where they met, and their
-    map frames), and the ATE (evo) of the anchors in the reference frame, as they are and
-    rigidly aligned, before (odometry placed by the recovered frames) and after optimisation."""
-    frames = {r: map_to_world(subs) for r, subs in submaps.items()}
-    truth = {(r, s.seq): s.gt_anchor for r, subs in submaps.items() for s in subs}
-    kept = [b.edges[e] for e in b.accepted]
-    before, after, true = [], [], []
-    for r, subs in sorted(submaps.items()):
-        for s in subs:
-            before.append(b.to_reference[r] @ s.anchor)
-            after.append(b.poses[(r, s.seq)])
-            true.append(invert(frames[b.reference[r]]) @ s.gt_anchor)
-    before, after, true = np.array(before), np.array(after), np.array(true)
-    return {
-        "pairs": pair_errors(b.groups, submaps, b.poses, truth, kept, b.to_reference, frames),
-        "ate_before_m": ate(before, true),
-        "ate_after_m": ate(after, true),
-        "ate_aligned_before_m": ate(before, true, align=True),
-        "ate_aligned_after_m": ate(after, true, align=True),
-    }
-
-
-def ate(estimate: np.ndarray, truth: np.ndarray, align: bool = False) -> float:
-    """RMSE of anchor positions (evo's APE, translation part). Both are in the reference frame;
-    ``align`` first fits the estimate to the truth by one rigid motion (evo's ``--align``), which
-    takes out where the reference robot's own drift put the whole map."""
-    from evo.core import metrics
-    from evo.core.trajectory import PosePath3D
-
-    reference, moved = PosePath3D(poses_se3=list(truth)), PosePath3D(poses_se3=list(estimate))
-    if align:
-        moved.align(reference)
-    ape = metrics.APE(metrics.PoseRelation.translation_part)
-    ape.process_data((reference, moved))
-    return float(ape.get_statistic(metrics.StatisticsType.rmse))

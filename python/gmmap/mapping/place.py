@@ -31,8 +31,9 @@ from gmmap.errors import InvalidInputError
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import as_points
 from gmmap.math.register import Registration, register
+from gmmap.options import PlaceOptions, RegisterOptions
 
-RESAMPLE_POINTS = 4096  # as PointNetVLAD's input
+RESAMPLE_POINTS = PlaceOptions.resample_points
 
 
 def resample(gmm: Gmm, n: int = RESAMPLE_POINTS, seed: int = 0) -> np.ndarray:
@@ -144,43 +145,12 @@ class Match:
 
 
 @dataclass
-class PlaceOptions:
-    """``max_distance``: the paper's d_thr on cosine distance; ``min_confidence``: C_thr;
-    ``top_k`` candidates verified per query; a robot's ``skip_recent`` latest own submaps are
-    not candidates (they overlap the query by construction).
-
-    C_thr 0.75: with five LiDAR robots in the simulated office, corridor views turned 180°
-    reach C 0.5-0.8 and outnumber the true matches above 0.55, none pass 0.75; on fr1_xyz
-    halves (20-frame submaps) the merged frame is 2.4 cm / 0.9° with it. Submaps of only a
-    few depth frames score lower (true matches of 2-frame submaps near 0.6): lower it there.
-    """
-
-    top_k: int = 5
-    max_distance: float = 0.1
-    min_confidence: float = 0.75
-    # Reject when another basin scores this close to the best (alternative / confidence):
-    # the geometry is ambiguous, e.g. a corridor seen end for end.
-    max_ambiguity: float = 0.85
-    skip_recent: int = 2
-    resample_points: int = RESAMPLE_POINTS
-    dof: int = 6
-    use_yaw_hint: bool = False  # the descriptor's yaw instead of the full yaw search
-
-    def __post_init__(self) -> None:
-        if self.top_k < 1 or self.resample_points < 2 or self.skip_recent < 0:
-            raise InvalidInputError("top_k >= 1, resample_points >= 2, skip_recent >= 0")
-        if not 0 <= self.min_confidence <= 1 or not 0 <= self.max_distance <= 2:
-            raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2]")
-        if not 0 < self.max_ambiguity <= 1:
-            raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
-
-
-@dataclass
 class PlaceDatabase:
     """One robot's descriptors of every submap it holds, own and received."""
 
     descriptor: Descriptor = field(default_factory=ShapeDescriptor)
     options: PlaceOptions = field(default_factory=PlaceOptions)
+    registration: RegisterOptions = field(default_factory=RegisterOptions)
     keys: list[tuple[str, int]] = field(default_factory=list)
     gmms: dict[tuple[str, int], Gmm | None] = field(default_factory=dict)
     _vectors: list[np.ndarray] = field(default_factory=list)
@@ -261,7 +231,7 @@ class PlaceDatabase:
         if self.options.use_yaw_hint and hasattr(self.descriptor, "yaw"):
             n = self.options.resample_points
             hint = self.descriptor.yaw(resample(query, n), resample(target, n))
-        return register(query, target, yaw_hint=hint, dof=self.options.dof)
+        return register(query, target, yaw_hint=hint, options=self.registration)
 
     def score(self, reg: Registration) -> float:
         """The confidence C, scaled down to 0 as the best other basin's confidence rises from

@@ -29,34 +29,7 @@ from scipy.special import ndtr
 
 from gmmap.errors import InvalidInputError
 from gmmap.math.gmm import Gmm
-
-
-@dataclass(frozen=True)
-class PlannerOptions:
-    """Robot size and the planner's rule. Heights are in the map frame (floor at z = 0)."""
-
-    robot_radius: float = 0.2
-    margin: float = 0.05  # kept beyond the radius (the A* baseline inflates by one 5 cm cell)
-    z_band: tuple[float, float] = (0.05, 1.2)  # heights the robot's body occupies
-    step: float = 0.1  # metres per step
-    g_thr: float = 1.5  # directional gradient threshold (occupancy per metre)
-    min_support: float = 0.05  # density, relative to the map's median, of a full obstacle
-    max_occupancy: float = 0.5  # the level at radius + margin from a surface; never entered
-    goal_tolerance: float = 0.15
-    directions: int = 12
-    max_steps: int = 2000
-    stuck_window: int = 80  # steps without progress towards the goal before giving up
-
-    def __post_init__(self) -> None:
-        if not (self.robot_radius > 0 and self.step > 0 and self.goal_tolerance > 0):
-            raise InvalidInputError("robot_radius, step and goal_tolerance must be positive")
-        if self.z_band[1] <= self.z_band[0]:
-            raise InvalidInputError(f"z_band must be (low, high), got {self.z_band}")
-        if self.directions < 4 or self.directions % 2:
-            raise InvalidInputError("directions must be an even number >= 4")
-        if not 0 < self.max_occupancy < 1:
-            raise InvalidInputError("max_occupancy must be in (0, 1)")
-
+from gmmap.options import PlannerOptions
 
 # Components combine by a smooth maximum (a p-norm): o is about the largest a_k, so the faint
 # tails of many components do not add up to close a doorway, as a sum or a product would.

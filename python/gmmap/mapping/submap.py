@@ -11,8 +11,8 @@ and its components selected. Strategies:
   mixtures concatenated with equal weight per frame.
 - ``per-frame`` (no submap): every accepted frame becomes a submap of its own.
 
-Model selection (``gmmap.math.select``) then merges redundant components; for the strategies that fit
-points, ``refine_iter`` EM iterations with full covariances follow, started from the merged
+Model selection (``gmmap.math.select``) then merges redundant components; for the strategies
+that fit points, ``refine_iter`` EM iterations with full covariances follow, started from the merged
 mixture. This goes beyond the paper: merging alone trades likelihood for size, while merging
 then refining keeps fewer components *and* fits better, because full covariances follow
 oblique surfaces that axis-aligned ones cannot.
@@ -36,39 +36,11 @@ from gmmap.math.em import fit_gmm
 from gmmap.math.fileio import load_npz, save_npz
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import voxel_filter
-from gmmap.math.select import SelectOptions, select_components
+from gmmap.math.select import select_components
+from gmmap.options import BuildOptions, SelectOptions
 
-STRATEGIES = ("points", "gmm-merge", "per-frame")
 FILE_FORMAT = "gmmap submap"
 FILE_VERSION = 1
-
-
-@dataclass(frozen=True)
-class BuildOptions:
-    """How submaps are built (see the module docstring)."""
-
-    frames_per_submap: int = 40
-    voxel_size: float = 0.05
-    strategy: str = "points"
-    n_components: int = 100
-    covariance: str = "diag"
-    min_novelty: float = 0.05  # fraction of a frame's voxels that must be new
-    select: bool = True
-    selection: SelectOptions = field(default_factory=SelectOptions)
-    refine_iter: int = 10  # EM iterations (full covariances) after selection; 0: none
-    holdout: float = 0.0  # fraction of buffered points withheld from fitting, for evaluation
-    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # map frame's up; None: no levelling
-    max_iter: int = 100
-    tol: float = 1e-3
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.strategy not in STRATEGIES:
-            raise InvalidInputError(f"strategy must be one of {STRATEGIES}, got {self.strategy!r}")
-        if self.frames_per_submap < 1:
-            raise InvalidInputError("frames_per_submap must be >= 1")
-        if not 0.0 <= self.holdout < 1.0 or not 0.0 <= self.min_novelty <= 1.0:
-            raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
 
 
 @dataclass
@@ -139,9 +111,15 @@ def level(pose: np.ndarray, up: np.ndarray | None) -> np.ndarray:
 class SubmapBuilder:
     """Turns frames into submaps: call ``add`` per frame, ``flush`` at the end."""
 
-    def __init__(self, robot: str = "robot", options: BuildOptions | None = None) -> None:
+    def __init__(
+        self,
+        robot: str = "robot",
+        options: BuildOptions | None = None,
+        select: SelectOptions | None = None,
+    ) -> None:
         self.robot = robot
         self.options = options or BuildOptions()
+        self.selection = select or SelectOptions()
         self.seq = 0
         self.frames_seen = 0
         self.frames_skipped = 0
@@ -210,7 +188,7 @@ class SubmapBuilder:
             gmm = fit_gmm(train, o.n_components, o.covariance, o.max_iter, o.tol, o.seed)
         before = gmm
         if o.select:
-            gmm = select_and_refine(gmm, train, o)
+            gmm = select_and_refine(gmm, train, o, self.selection)
         stats = {
             "frames": len(self.stamps),
             "points": len(points),
@@ -238,12 +216,14 @@ class SubmapBuilder:
         return submap
 
 
-def select_and_refine(gmm: Gmm, points: np.ndarray, options: BuildOptions) -> Gmm:
+def select_and_refine(
+    gmm: Gmm, points: np.ndarray, options: BuildOptions, select: SelectOptions | None = None
+) -> Gmm:
     """Model selection, then (for strategies that fit points) a few EM iterations with full
     covariances from the merged mixture: the survivors re-fit the points they now cover, which
     wins back what the merges cost (see benchmarks/selection.py). The refit is kept only when
     it takes no more bytes than the fitted mixture (full covariances cost 3 floats more)."""
-    merged = select_components(gmm, options.selection)
+    merged = select_components(gmm, select)
     if options.refine_iter == 0 or options.strategy == "gmm-merge":
         return merged
     refined = fit_gmm(
@@ -266,10 +246,13 @@ def concatenate(gmms: Sequence[Gmm], shares: Sequence[float] | None = None) -> G
 
 
 def build_submaps(
-    frames: Iterable[Frame], robot: str = "robot", options: BuildOptions | None = None
+    frames: Iterable[Frame],
+    robot: str = "robot",
+    options: BuildOptions | None = None,
+    select: SelectOptions | None = None,
 ) -> Iterator[Submap]:
     """Submaps of a frame sequence, the last partial one included."""
-    builder = SubmapBuilder(robot, options)
+    builder = SubmapBuilder(robot, options, select)
     for frame in frames:
         submap = builder.add(frame)
         if submap is not None:

@@ -12,37 +12,11 @@ exactly. Cost: O(K log K) for well-spread components (a spatial hash finds the n
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from gmmap import _core
-from gmmap.errors import InvalidInputError
 from gmmap.math.gmm import Gmm
-
-
-@dataclass(frozen=True)
-class SelectOptions:
-    """Thresholds of the model selection (see the module docstring).
-
-    The defaults come from the sweep in ``benchmarks/selection.py`` (TUM fr1_xyz, fr3 cabinet,
-    KITTI, the simulated office): on the indoor submaps they merge a third or more of 100
-    components. Merging alone then costs 0.07-0.1 nats of held-out log-likelihood per point;
-    the submap builder's refit afterwards (``BuildOptions.refine_iter``) more than wins it back.
-    """
-
-    flat_ratio: float = 0.1
-    max_distance: float = 2.0
-    kl_threshold: float = 16.0
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.max_distance) and self.max_distance > 0):
-            raise InvalidInputError(f"max_distance must be > 0, got {self.max_distance}")
-        for name in ("flat_ratio", "kl_threshold"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise InvalidInputError(f"{name} must be finite and >= 0, got {value}")
+from gmmap.options import SelectOptions
 
 
 def select_components(

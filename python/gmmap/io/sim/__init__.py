@@ -1,8 +1,16 @@
 """The multi-robot simulator: worlds of primitives, ray-cast sensors, robots with odometry."""
 
 from gmmap.io.sim.robots import Motion, route_poses
-from gmmap.io.sim.run import UP, SimRobot, simulate, write_pointfiles, write_run, write_tum
-from gmmap.io.sim.sensors import ROBOT_SENSORS, DepthCamera, Lidar, robot_sensor
+from gmmap.io.sim.run import (
+    UP,
+    SimRobot,
+    simulate,
+    simulate_options,
+    write_pointfiles,
+    write_run,
+    write_tum,
+)
+from gmmap.io.sim.sensors import ROBOT_SENSORS, DepthCamera, Lidar, robot_sensor, sim_sensor
 from gmmap.io.sim.world import Box, Cylinder, World
 from gmmap.io.sim.worlds import WORLDS, get_world
 
@@ -20,7 +28,9 @@ __all__ = [
     "get_world",
     "robot_sensor",
     "route_poses",
+    "sim_sensor",
     "simulate",
+    "simulate_options",
     "write_pointfiles",
     "write_run",
     "write_tum",

@@ -16,9 +16,12 @@ from gmmap.io.datasets.ply import write_ply
 from gmmap.io.datasets.trajectory import write_trajectory
 from gmmap.io.datasets.tum import depth_to_points
 from gmmap.io.sim.robots import Motion, route_poses
-from gmmap.io.sim.sensors import DepthCamera, Lidar
+from gmmap.io.sim.sensors import DepthCamera, Lidar, sim_sensor
 from gmmap.io.sim.world import World
+from gmmap.io.sim.worlds import get_world
 from gmmap.mapping.frame import Frame
+from gmmap.math.drift import Drift
+from gmmap.options import SimOptions
 
 Sensor = DepthCamera | Lidar
 Progress = Callable[[int], None]
@@ -195,3 +198,12 @@ def write_run(
     }
     (out / "sim.json").write_text(json.dumps(meta, indent=1))
     return meta
+
+
+def simulate_options(options: SimOptions, max_frames: int | None = None) -> list[SimRobot]:
+    """`simulate` as the ``sim`` section of the configuration describes it."""
+    o = options
+    world = World.load(o.world) if o.world.endswith(".json") else get_world(o.world)
+    drift = Drift.per_metre(o.drift, o.seed, UP)
+    motion = Motion(speed=o.speed, rate=o.rate)
+    return simulate(world, o.robots, o.seed, sim_sensor(o), motion, drift, max_frames)

@@ -10,6 +10,7 @@ import numpy as np
 from gmmap.errors import InvalidInputError
 from gmmap.io.datasets.tum import Intrinsics
 from gmmap.io.sim.world import World
+from gmmap.options import SimOptions
 
 # Body frame: x forward, y left, z up. Camera frame: z forward, x right, y down.
 BODY_TO_CAMERA_ROTATION = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -128,3 +129,12 @@ def robot_sensor(kind: str, width: int = 640) -> DepthCamera | Lidar:
     if kind not in ROBOT_SENSORS:
         raise InvalidInputError(f"sensor must be one of {ROBOT_SENSORS}, got {kind!r}")
     return Lidar() if kind == "lidar" else DepthCamera.scaled(width, width * 3 // 4)
+
+
+def sim_sensor(options: SimOptions) -> DepthCamera | Lidar:
+    """The sensor of the ``sim`` configuration section."""
+    o = options
+    if o.sensor == "lidar":
+        noise = Lidar.noise_std if o.noise else 0.0
+        return Lidar(beams=o.beams, max_range=o.lidar_range, noise_std=noise)
+    return DepthCamera.scaled(o.width, o.width * 3 // 4, o.noise)

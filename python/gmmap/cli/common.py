@@ -1,0 +1,140 @@
+"""What the commands share: the configuration options, progress output and frame selection."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from gmmap.config import Config, load_config
+from gmmap.options import drift_overrides
+
+SEP = "__"  # a flag's parameter name is its config key with '.' → '__'
+
+
+def log(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+def _default(key: str) -> Any:
+    section, name = key.split(".")
+    return getattr(getattr(Config(), section), name)
+
+
+def setting(flag: str, key: str, help: str, **kw: Any):
+    """A flag that overrides one configuration key (it defaults to the config's value)."""
+    default = _default(key)
+    shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
+    return click.option(
+        flag, key.replace(".", SEP), default=None, help=f"{help}  [{key}: {shown}]", **kw
+    )
+
+
+def config_option(fn: Callable) -> Callable:
+    """``--config FILE`` (the tree flags override) and ``--odometry-drift`` where the command
+    has a backend; the command receives ``config`` (a `Config`) instead of the flags."""
+
+    @click.option(
+        "--config",
+        "config_path",
+        type=click.Path(exists=True, dir_okay=False, path_type=Path),
+        help="A YAML configuration (see gmmap config --dump); flags override it.",
+    )
+    @functools.wraps(fn)
+    def wrapper(config_path: Path | None, **kw: Any):
+        # An option with multiple=True that was not given arrives as (): not an override.
+        given = {k: kw.pop(k) for k in list(kw) if SEP in k}
+        overrides = {k.replace(SEP, "."): v for k, v in given.items() if v != ()}
+        drift = kw.pop("odometry_drift", None)
+        if drift is not None:
+            overrides.update({f"backend.{k}": v for k, v in drift_overrides(drift).items()})
+        return fn(config=load_config(config_path).override(overrides), **kw)
+
+    return wrapper
+
+
+def odometry_drift_option(fn: Callable) -> Callable:
+    return click.option(
+        "--odometry-drift",
+        type=float,
+        help="The pose graph's odometry noise per metre (backend.translation, rotation_per_rad; "
+        "a quarter in rotation_per_m). 0.002 for motion-capture poses.  [0.02]",
+    )(fn)
+
+
+def frame_options(fn: Callable) -> Callable:
+    """--frames START:STOP and --max-frames, given to the command as one ``select`` function."""
+
+    @click.option("--frames", "frame_range", help="Use only frames START:STOP (e.g. :400, 400:).")
+    @click.option("--max-frames", type=int, help="Use only the first frames (after --frames).")
+    @functools.wraps(fn)
+    def wrapper(frame_range: str | None, max_frames: int | None, **kw: Any):
+        return fn(pick=lambda frames: pick_frames(frames, frame_range, max_frames), **kw)
+
+    return wrapper
+
+
+def pick_frames(frames, frame_range: str | None, max_frames: int | None):
+    """Frames START:STOP of a lazy sequence, then the first ``max_frames``, still lazy."""
+    chosen = range(len(frames))[_slice(frame_range)] if frame_range else range(len(frames))
+    return Frames(frames, chosen[:max_frames] if max_frames else chosen)
+
+
+class Frames:
+    """Frames ``indices`` of a lazy sequence, itself a lazy sequence."""
+
+    def __init__(self, frames, indices: range) -> None:
+        self.frames, self.indices = frames, indices
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, i: int):
+        return self.frames[self.indices[i]]
+
+    def __iter__(self):
+        return (self.frames[i] for i in self.indices)
+
+
+def _slice(text: str) -> slice:
+    try:
+        parts = [int(p) if p.strip() else None for p in text.split(":")]
+    except ValueError:
+        parts = []
+    if len(parts) != 2:
+        raise click.BadParameter(f"{text!r} is not START:STOP", param_hint="--frames")
+    return slice(*parts)
+
+
+def open_data(path: Path, stride: int | None = None, **options: Any):
+    from gmmap.io import datasets
+
+    return datasets.open(path, **({"stride": stride} if stride else {}), **options)
+
+
+SIM_SETTINGS = (
+    setting("--world", "sim.world", "A built-in world or a world .json file."),
+    setting("--robots", "sim.robots", "Simulated robots.", type=int),
+    setting("--seed", "sim.seed", "Sensor noise and odometry seed.", type=int),
+    setting(
+        "--sensor",
+        "sim.sensor",
+        "16-beam LiDAR or 60° depth camera.",
+        type=click.Choice(["lidar", "depth"]),
+    ),
+    setting("--sim-width", "sim.width", "Depth camera image width (px, 4:3).", type=int),
+    setting("--sim-drift", "sim.drift", "Simulated odometry error per metre.", type=float),
+)
+
+
+def sim_settings(fn: Callable) -> Callable:
+    for option in reversed(SIM_SETTINGS):
+        fn = option(fn)
+    return fn
+
+
+def as_json_option(fn: Callable) -> Callable:
+    return click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")(fn)

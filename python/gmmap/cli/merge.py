@@ -1,0 +1,122 @@
+"""``gmmap merge``: submap folders of several robots → frames between them and global maps."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+
+from gmmap.cli.common import (
+    as_json_option,
+    config_option,
+    log,
+    odometry_drift_option,
+    setting,
+)
+from gmmap.config import Config
+
+
+@click.command("merge")
+@click.argument(
+    "folders",
+    nargs=-1,
+    required=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
+@setting("--top-k", "place.top_k", "Candidates verified per submap.", type=int)
+@setting("--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float)
+@setting("--min-matches", "backend.min_matches", "Consistent matches before two maps join.",
+         type=click.IntRange(min=1))  # fmt: skip
+@odometry_drift_option
+@click.option(
+    "--wrong-matches",
+    default=0.0,
+    show_default=True,
+    help="Robustness test: replace this fraction of verified matches by wrong ones.",
+)
+@click.option("--seed", default=0, show_default=True, help="Seeds --wrong-matches.")
+@config_option
+@as_json_option
+def command(
+    folders: tuple[Path, ...],
+    out: Path | None,
+    wrong_matches: float,
+    seed: int,
+    config: Config,
+    as_json: bool,
+) -> None:
+    """Merge submap folders of several robots (from `gmmap build`): place recognition,
+    registration, the robust pose graph and a global map per connected group."""
+    from gmmap.eval.merge import merge
+
+    submaps = read_folders(folders)
+    mapper, report = merge(submaps, config, log, wrong_matches, seed)
+    if out:
+        save_maps(mapper.global_maps(log), out)
+        (out / "merge.json").write_text(json.dumps(report, indent=1))
+        config.save(out)
+        log(f"wrote the global map(s), merge.json and config.yaml to {out}")
+    click.echo(json.dumps(report) if as_json else describe(report, len(submaps)))
+
+
+def read_folders(folders: tuple[Path, ...]) -> dict:
+    from gmmap.mapping.submap import read_submaps
+
+    submaps: dict = {}
+    for folder in folders:
+        subs = read_submaps(folder)
+        if not subs:
+            raise click.BadParameter(f"{folder} holds no submaps", param_hint="FOLDERS")
+        if subs[0].robot in submaps:
+            raise click.BadParameter(
+                f"two folders of robot {subs[0].robot!r}: name them with gmmap build --robot",
+                param_hint="FOLDERS",
+            )
+        submaps[subs[0].robot] = subs
+    return submaps
+
+
+def save_maps(maps: dict, out: Path) -> None:
+    from gmmap.io import viz
+
+    out.mkdir(parents=True, exist_ok=True)
+    for ref, gmap in maps.items():
+        gmap.save(out / f"globalmap_{ref}.npz")
+        gmap.save_ply(out / f"globalmap_{ref}.ply")
+        gmap.save_png(out / f"globalmap_{ref}.png")
+        if viz.available():
+            viz.save_rerun(gmap, out / f"globalmap_{ref}.rrd")
+
+
+def describe(report: dict, robots: int) -> str:
+    from gmmap.eval.pairs import describe_pair
+    from gmmap.eval.registration import describe_match_errors
+
+    lines = [
+        f"{robots} robots, {report['candidates']} candidates, {report['verified']} verified; "
+        f"{report['accepted_edges']} edges accepted, {report['rejected_edges']} rejected "
+        f"{report['rejected_by']}",
+        f"groups: {report['groups']} (reference {report['reference']})",
+    ]
+    for r in report["robots"]:
+        t = np.array(r["to_reference"])
+        yaw = np.degrees(np.arctan2(t[1, 0], t[0, 0]))
+        lines.append(
+            f"{r['name']:>12} → {r['reference']:<12} t = {np.round(t[:3, 3], 3).tolist()} m, "
+            f"yaw {yaw:.2f}°, {r['submaps']} submaps"
+        )
+    lines += [f"error {describe_pair(p)}" for p in report.get("pairs", [])]
+    if "ate_before_m" in report:
+        lines.append(
+            f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
+            f"{report['ate_after_m']:.3f} m after optimisation; rigidly aligned "
+            f"{report['ate_aligned_before_m']:.3f} m and {report['ate_aligned_after_m']:.3f} m"
+        )
+    lines += describe_match_errors(report.get("match_errors", {}))
+    if "injected_wrong" in report:
+        w = report["injected_wrong"]
+        lines.append(f"injected wrong matches: {w['rejected']} of {w['n']} rejected")
+    return "\n".join(lines)

@@ -1,0 +1,116 @@
+"""``gmmap robot``: one robot node mapping a dataset or a simulated robot, over Zenoh."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from gmmap.cli.common import (
+    config_option,
+    frame_options,
+    log,
+    odometry_drift_option,
+    open_data,
+    setting,
+    sim_settings,
+)
+from gmmap.config import Config
+
+
+@click.command("robot")
+@setting("--id", "robot.name", "This robot's name (unique in the fleet).")
+@setting("--fleet", "robot.fleet", "The fleet's name: robots of other fleets are ignored.")
+@click.option("--data", type=click.Path(exists=True, path_type=Path), help="A dataset to map.")
+@click.option("--sim", "simulated", is_flag=True, help="Map a simulated robot (sim section).")
+@click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
+@sim_settings
+@click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
+@frame_options
+@setting("--listen", "transport.listen", "Zenoh listen endpoint (default loopback).",
+         multiple=True)  # fmt: skip
+@setting("--port", "transport.port", "Loopback listen port (0: free).", type=int)
+@setting("--peer", "transport.connect", "Zenoh endpoint of another robot.", multiple=True)
+@setting("--wait-for", "robot.wait_for", "Wait for these robots before mapping.", multiple=True)
+@setting("--store", "robot.store", "The robot's SQLite store (default: temporary).")
+@setting("--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int)
+@setting("--components", "build.n_components", "Components fitted.", type=int)
+@setting(
+    "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
+)
+@odometry_drift_option
+@setting("--min-matches", "backend.min_matches", "Consistent matches before two maps join.",
+         type=click.IntRange(min=1))  # fmt: skip
+@setting("--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float)
+@setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--truth",
+    "truth_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="For evaluation: write the own anchors' ground truth (where the frames carry it) here.",
+)
+@click.option(
+    "--map-png",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the merged map of this robot's group as a PNG (and, with the viz extra, "
+    "a Rerun recording beside it: .rrd).",
+)
+@click.option("--json", "as_json", is_flag=True, help="One JSON status line per submap.")
+@config_option
+def command(
+    data: Path | None,
+    simulated: bool,
+    sim_index: int,
+    stride: int | None,
+    pick,
+    report_path: Path | None,
+    truth_path: Path | None,
+    map_png: Path | None,
+    as_json: bool,
+    config: Config,
+) -> None:
+    """Run one robot node: map, share submaps over Zenoh, match, optimise, report."""
+    from gmmap.fleet.robot import Built
+    from gmmap.fleet.runner import run_robot
+
+    frames = pick(_frames(data, simulated, sim_index, stride, config))
+    truth: dict[str, list] = {}
+
+    def on_built(built: Built) -> None:
+        line = built.status
+        if built.submap.gt_anchor is not None:
+            truth[str(built.submap.seq)] = built.submap.gt_anchor.tolist()
+        if as_json:
+            click.echo(json.dumps(line))
+        else:
+            log(
+                f"{line['robot']}: submap {line['seq']} ({line['bytes']} B), "
+                f"{line['received']} received, {line['matches']} matches, groups {line['groups']}"
+            )
+
+    r = run_robot(config, frames, report_path, map_png, on_built, log)
+    if report_path is not None:  # the effective configuration beside the report
+        config.save(report_path.with_suffix(".config.yaml"))
+    if truth_path is not None:
+        truth_path.parent.mkdir(parents=True, exist_ok=True)
+        truth_path.write_text(json.dumps(truth))
+    log(
+        f"{config.robot.name}: {r['submaps_built']} built, {r['submaps_received']} received, "
+        f"{r['matches_accepted']} matches accepted, {r['matches_rejected']} rejected, "
+        f"groups {r['groups']}"
+    )
+
+
+def _frames(data: Path | None, simulated: bool, index: int, stride: int | None, config: Config):
+    if (data is None) == (not simulated):
+        raise click.UsageError("give exactly one of --data and --sim")
+    if data is not None:
+        return open_data(data, stride)
+    from gmmap.io.sim import simulate_options
+
+    run = simulate_options(config.sim)
+    if not 0 <= index < len(run):
+        raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
+    return run[index]

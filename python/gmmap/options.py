@@ -1,0 +1,397 @@
+"""Every setting of gmmap, each defined once with its one default: the sections of `gmmap.config`.
+
+One frozen dataclass per stage of the data flow (build, select, register, place, backend,
+transport, robot, planner, sim). The stages take their section; the Rust core receives every
+value it uses from here. This module imports nothing heavy (no GTSAM, no Zenoh), so a core
+install can read, validate and dump a configuration.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from gmmap.errors import InvalidInputError, TransportConfigError
+
+STRATEGIES = ("points", "gmm-merge", "per-frame")
+COVARIANCES = ("diag", "full")
+SENSORS = ("lidar", "depth")
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """How submaps are built (`gmmap.mapping.submap`).
+
+    ``frames_per_submap`` 20 is the paper's simulation and what live robots and the merge
+    benchmarks use; its Table I used 5 (``gmmap eval registration`` keeps 5). Full covariances:
+    registration across robots is more accurate with them (fr1_xyz halves, fast rotation) and
+    the refit after selection produces full ones anyway.
+    """
+
+    frames_per_submap: int = 20
+    voxel_size: float = 0.05
+    strategy: str = "points"
+    n_components: int = 100
+    covariance: str = "full"
+    min_novelty: float = 0.05  # fraction of a frame's voxels that must be new
+    select: bool = True
+    refine_iter: int = 10  # EM iterations (full covariances) after selection; 0: none
+    holdout: float = 0.0  # fraction of buffered points withheld from fitting, for evaluation
+    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # map frame's up; None: no levelling
+    max_iter: int = 100
+    tol: float = 1e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise InvalidInputError(f"strategy must be one of {STRATEGIES}, got {self.strategy!r}")
+        if self.covariance not in COVARIANCES:
+            raise InvalidInputError(f"covariance must be one of {COVARIANCES}")
+        if self.frames_per_submap < 1 or self.n_components < 1:
+            raise InvalidInputError("frames_per_submap and n_components must be >= 1")
+        if not 0.0 <= self.holdout < 1.0 or not 0.0 <= self.min_novelty <= 1.0:
+            raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
+        if not self.voxel_size > 0:
+            raise InvalidInputError(f"voxel_size must be > 0, got {self.voxel_size}")
+
+
+@dataclass(frozen=True)
+class SelectOptions:
+    """Thresholds of the model selection (`gmmap.math.select`), for submaps and global maps.
+
+    The defaults come from the sweep in ``benchmarks/selection.py`` (TUM fr1_xyz, fr3 cabinet,
+    KITTI, the simulated office): on the indoor submaps they merge a third or more of 100
+    components. Merging alone then costs 0.07-0.1 nats of held-out log-likelihood per point;
+    the submap builder's refit afterwards (``BuildOptions.refine_iter``) more than wins it back.
+    """
+
+    flat_ratio: float = 0.1
+    max_distance: float = 2.0
+    kl_threshold: float = 16.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.max_distance) and self.max_distance > 0):
+            raise InvalidInputError(f"max_distance must be > 0, got {self.max_distance}")
+        for name in ("flat_ratio", "kl_threshold"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InvalidInputError(f"{name} must be finite and >= 0, got {value}")
+
+
+@dataclass(frozen=True)
+class RegisterOptions:
+    """GMM-to-GMM registration (`gmmap.math.register`).
+
+    Ladders are standard deviations (m) added to every covariance, coarse to fine: a guess needs
+    only a short one; a global search starts wide, where the yaw starts are compared.
+    ``information_scale`` None: the smaller component count (each component one independent
+    measurement). ``confidence_scale``: the widening under which C is measured, so that it
+    reflects shared geometry rather than how sharply each side was fitted.
+    """
+
+    local_scales: tuple[float, ...] = (0.05, 0.0)
+    global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.0)
+    max_iter: int = 10  # Levenberg-Marquardt iterations per scale
+    yaw_starts: int = 12
+    dof: int = 6  # 4: x, y, z and yaw only (ground robots)
+    information_scale: float | None = None
+    confidence_scale: float = 0.05
+    tol: float = 1e-5  # a scale ends when the step is smaller (radians + metres)
+    cutoff: float = 4.0  # component pairs farther apart than this many σ are skipped
+
+    def __post_init__(self) -> None:
+        if self.dof not in (4, 6):
+            raise InvalidInputError(f"dof must be 4 or 6, got {self.dof}")
+        for name in ("local_scales", "global_scales"):
+            ladder = getattr(self, name)
+            if not ladder or not all(math.isfinite(s) and s >= 0 for s in ladder):
+                raise InvalidInputError(f"{name} must be finite values >= 0, got {ladder}")
+        if not (math.isfinite(self.confidence_scale) and self.confidence_scale >= 0):
+            raise InvalidInputError("confidence_scale must be finite and >= 0")
+        if self.max_iter < 1 or self.yaw_starts < 1 or not self.cutoff > 0 or not self.tol > 0:
+            raise InvalidInputError("max_iter, yaw_starts >= 1; cutoff, tol > 0")
+        if self.information_scale is not None and not self.information_scale > 0:
+            raise InvalidInputError("information_scale must be > 0 (or null)")
+
+
+@dataclass(frozen=True)
+class PlaceOptions:
+    """Place recognition and verification (`gmmap.mapping.place`). ``max_distance``: the paper's
+    d_thr on cosine distance; ``min_confidence``: C_thr; ``top_k`` candidates verified per
+    query; a robot's ``skip_recent`` latest own submaps are not candidates (they overlap the
+    query by construction).
+
+    C_thr 0.75: with five LiDAR robots in the simulated office, corridor views turned 180°
+    reach C 0.5-0.8 and outnumber the true matches above 0.55, none pass 0.75; on fr1_xyz
+    halves (20-frame submaps) the merged frame is 2.4 cm / 0.9° with it. Submaps of only a
+    few depth frames score lower (true matches of 2-frame submaps near 0.6): lower it there.
+    """
+
+    top_k: int = 5
+    max_distance: float = 0.1
+    min_confidence: float = 0.75
+    # Reject when another basin scores this close to the best (alternative / confidence):
+    # the geometry is ambiguous, e.g. a corridor seen end for end.
+    max_ambiguity: float = 0.85
+    skip_recent: int = 2
+    resample_points: int = 4096  # as PointNetVLAD's input
+    use_yaw_hint: bool = False  # the descriptor's yaw instead of the full yaw search
+
+    def __post_init__(self) -> None:
+        if self.top_k < 1 or self.resample_points < 2 or self.skip_recent < 0:
+            raise InvalidInputError("top_k >= 1, resample_points >= 2, skip_recent >= 0")
+        if not 0 <= self.min_confidence <= 1 or not 0 <= self.max_distance <= 2:
+            raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2]")
+        if not 0 < self.max_ambiguity <= 1:
+            raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
+
+
+@dataclass(frozen=True)
+class BackendOptions:
+    """Noise models, robustness switches and thresholds of the pose graph
+    (`gmmap.mapping.backend`).
+
+    The odometry parameters mean what `gmmap.math.drift.Drift`'s do (floors > 0 so a robot
+    standing still still gives an invertible factor). A match's covariance gets the match
+    floors added in quadrature, because registration information (component counts as
+    independent measurements) is optimistic: the curvature says millimetres, while verified
+    cross-robot matches on real data are off by a median 2.7 cm / 0.95° (fr1_xyz halves). With
+    the floors at that accuracy every match counts about alike, and the merged frame of the
+    fr1_xyz halves comes to 2.3 cm / 1.0° instead of 3.8 cm / 1.5° with 1 cm / 0.3° floors.
+    """
+
+    translation: float = 0.02
+    translation_floor: float = 0.001
+    rotation_per_rad: float = 0.02
+    rotation_per_m: float = 0.005
+    rotation_floor: float = 0.001
+    match_sigma_translation: float = 0.05  # m, for a match given without information
+    match_sigma_rotation: float = 0.02  # rad, idem
+    match_floor_translation: float = 0.03
+    match_floor_rotation: float = 0.017
+    pcm: bool = True
+    # χ² quantile of the pairwise test. Lenient on purpose: with m true matches between two
+    # robots about m²(1 − p)/2 true pairs fail and the clique loses up to one match per failed
+    # pair, while random wrong matches sit at d² in the thousands; GNC judges what passes.
+    pcm_probability: float = 0.999
+    pcm_exact_budget: int = 5_000  # branch-and-bound nodes per robot pair
+    # Two robots' maps join only once this many of their matches are mutually consistent;
+    # fewer are held back ("pending") until more arrive. 1 trusts a single match, which PCM
+    # cannot test; 2 stops a lone aliased match (a corridor seen end for end) from joining.
+    min_matches: int = 1
+    gnc: bool = True
+    gnc_probability: float = 0.99  # χ² quantile of GNC's inlier threshold
+    prior_sigma: float = 1e-4  # the reference prior (m and rad)
+    max_iterations: int = 100  # Levenberg-Marquardt, per GNC step
+
+    @classmethod
+    def for_drift(cls, drift: float, **options: Any) -> BackendOptions:
+        """Odometry noise of `Drift.per_metre` (drift), the other ``options`` as given: the
+        default 0.02 is wheel odometry; motion-capture poses (TUM's ground truth) are nearer
+        0.002."""
+        return cls(**drift_overrides(drift), **options)
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if isinstance(value, bool):
+                continue
+            if not (math.isfinite(value) and value >= 0):
+                raise InvalidInputError(f"BackendOptions.{name} must be finite and >= 0")
+        for name in ("translation_floor", "rotation_floor", "prior_sigma"):
+            if getattr(self, name) <= 0:
+                raise InvalidInputError(f"BackendOptions.{name} must be > 0")
+        if int(self.min_matches) != self.min_matches or self.min_matches < 1:
+            raise InvalidInputError("BackendOptions.min_matches must be an integer >= 1")
+        for name in ("pcm_probability", "gnc_probability"):
+            if not 0 < getattr(self, name) < 1:
+                raise InvalidInputError(f"BackendOptions.{name} must be in (0, 1)")
+        if self.match_sigma_translation <= 0 or self.match_sigma_rotation <= 0:
+            raise InvalidInputError("BackendOptions.match_sigma_* must be > 0")
+
+
+def drift_overrides(drift: float) -> dict[str, float]:
+    """The odometry fields of `BackendOptions` for one drift figure, shaped like
+    `gmmap.math.drift.Drift.per_metre`: ``drift`` per metre per axis and rad per radian turned,
+    a quarter of it in rad per metre."""
+    return {"translation": drift, "rotation_per_rad": drift, "rotation_per_m": drift / 4}
+
+
+# Names become one key-expression chunk each: verbatim characters only ('?', '#', '@'), nothing
+# that needs escaping. Leading letter or digit.
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+_OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
+MODES = ("peer", "client")
+
+
+def check_name(what: str, name: object) -> str:
+    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
+        raise TransportConfigError(
+            f"{what} must be 1-64 characters from [A-Za-z0-9_.-] starting with a letter or digit "
+            f"(no '/', '*', '?', '#', '@', '$' or spaces); got {name!r}"
+        )
+    return name
+
+
+def check_endpoint(endpoint: object, *, listen: bool) -> str:
+    """A Zenoh endpoint ``<protocol>/<address>[?metadata][#config]``; IP addresses need a port."""
+    if not isinstance(endpoint, str) or not endpoint or endpoint != endpoint.strip():
+        raise TransportConfigError(f"endpoint must be a non-empty string; got {endpoint!r}")
+    locator = re.split(r"[?#]", endpoint, maxsplit=1)[0]
+    protocol, sep, address = locator.partition("/")
+    if not sep or not address:
+        raise TransportConfigError(
+            f"endpoint {endpoint!r} is not <protocol>/<address> (e.g. tcp/127.0.0.1:7447)"
+        )
+    if protocol in _OTHER_PROTOCOLS:
+        return endpoint
+    if protocol not in _IP_PROTOCOLS:
+        raise TransportConfigError(
+            f"endpoint {endpoint!r}: unknown protocol {protocol!r} "
+            f"(one of {', '.join(_IP_PROTOCOLS + _OTHER_PROTOCOLS)})"
+        )
+    host, sep, port_text = address.rpartition(":")
+    if not sep or not host or not port_text.isdigit():
+        raise TransportConfigError(f"endpoint {endpoint!r}: address must be <host>:<port>")
+    port = int(port_text)
+    if not 0 <= port <= 65535 or (port == 0 and not listen):
+        raise TransportConfigError(f"endpoint {endpoint!r}: port {port} out of range")
+    if host.startswith("["):
+        if not host.endswith("]"):
+            raise TransportConfigError(f"endpoint {endpoint!r}: unbalanced '[' in IPv6 address")
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError as err:
+            raise TransportConfigError(f"endpoint {endpoint!r}: {err}") from None
+    elif not re.fullmatch(r"[A-Za-z0-9.\-]+", host):
+        raise TransportConfigError(f"endpoint {endpoint!r}: bad host {host!r}")
+    return endpoint
+
+
+@dataclass(frozen=True)
+class TransportOptions:
+    """Where a robot's Zenoh session listens and whom it connects to (`gmmap.fleet.transport`).
+
+    ``listen`` None means one loopback endpoint ``tcp/127.0.0.1:<port>``; ``port`` 0 picks a free
+    ephemeral port when the transport opens. Multicast scouting is off by default so that
+    fleets on one network only meet through ``connect`` endpoints (Zenoh's gossip still lets
+    peers of peers find each other). ``zenoh_options`` are raw Zenoh configuration entries
+    (``{"transport/link/tx/lease": 5000}``) applied last.
+    """
+
+    listen: tuple[str, ...] | None = None
+    port: int = 0
+    connect: tuple[str, ...] = ()
+    mode: str = "peer"
+    multicast_scouting: bool = False
+    fetch_timeout: float = 2.0
+    zenoh_options: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise TransportConfigError(f"mode must be one of {MODES}; got {self.mode!r}")
+        if isinstance(self.port, bool) or not isinstance(self.port, int):
+            raise TransportConfigError(f"port must be an integer; got {self.port!r}")
+        if not 0 <= self.port <= 65535:
+            raise TransportConfigError(f"port must be in 0..65535; got {self.port}")
+        # Accept any sequence of strings but store tuples: the options stay immutable.
+        if self.listen is not None:
+            object.__setattr__(self, "listen", _endpoints("listen", self.listen))
+        object.__setattr__(self, "connect", _endpoints("connect", self.connect))
+        if self.mode == "client" and not self.connect:
+            raise TransportConfigError("mode 'client' needs at least one connect endpoint")
+        if not isinstance(self.fetch_timeout, (int, float)) or not self.fetch_timeout > 0:
+            raise TransportConfigError(f"fetch_timeout must be > 0 s; got {self.fetch_timeout!r}")
+        if not isinstance(self.zenoh_options, Mapping):
+            raise TransportConfigError("zenoh_options must be a mapping of key to value")
+
+
+def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
+    if isinstance(endpoints, str):
+        raise TransportConfigError(f"{what} must be a list of endpoints, not one string")
+    return tuple(check_endpoint(e, listen=what == "listen") for e in endpoints)
+
+
+@dataclass(frozen=True)
+class RobotOptions:
+    """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
+    ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
+    ``linger``: seconds it keeps receiving, matching and optimising after its frames end."""
+
+    name: str = "robot"
+    fleet: str = "gmmap"
+    store: str | None = None
+    wait_for: tuple[str, ...] = ()
+    wait_timeout: float = 30.0
+    linger: float = 5.0
+
+    def __post_init__(self) -> None:
+        check_name("robot.name", self.name)
+        check_name("robot.fleet", self.fleet)
+        for peer in self.wait_for:
+            check_name("robot.wait_for", peer)
+        if not (self.wait_timeout >= 0 and self.linger >= 0):
+            raise InvalidInputError("robot.wait_timeout and robot.linger must be >= 0")
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Robot size and the planner's rule (`gmmap.mapping.planner`). Heights are in the map frame
+    (floor at z = 0)."""
+
+    robot_radius: float = 0.2
+    margin: float = 0.05  # kept beyond the radius (the A* baseline inflates by one 5 cm cell)
+    z_band: tuple[float, float] = (0.05, 1.2)  # heights the robot's body occupies
+    step: float = 0.1  # metres per step
+    g_thr: float = 1.5  # directional gradient threshold (occupancy per metre)
+    min_support: float = 0.05  # density, relative to the map's median, of a full obstacle
+    max_occupancy: float = 0.5  # the level at radius + margin from a surface; never entered
+    goal_tolerance: float = 0.15
+    directions: int = 12
+    max_steps: int = 2000
+    stuck_window: int = 80  # steps without progress towards the goal before giving up
+
+    def __post_init__(self) -> None:
+        if not (self.robot_radius > 0 and self.step > 0 and self.goal_tolerance > 0):
+            raise InvalidInputError("robot_radius, step and goal_tolerance must be positive")
+        if self.z_band[1] <= self.z_band[0]:
+            raise InvalidInputError(f"z_band must be (low, high), got {self.z_band}")
+        if self.directions < 4 or self.directions % 2:
+            raise InvalidInputError("directions must be an even number >= 4")
+        if not 0 < self.max_occupancy < 1:
+            raise InvalidInputError("max_occupancy must be in (0, 1)")
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """The simulator (`gmmap.io.sim`): which world, how many robots, which sensor, how they move.
+
+    ``sensor``: a 16-beam 360° LiDAR, or a 60° depth camera ``width`` px wide (4:3), whose narrow
+    views alias more. ``drift``: the simulated odometry's error per metre driven (and rad per rad
+    turned; `gmmap.math.drift.Drift.per_metre`), which the robots never see. 320 px: the depth
+    demo at that width runs three robots in real time on two cores.
+    """
+
+    world: str = "office"  # a built-in world or a world .json file
+    robots: int = 3
+    seed: int = 0  # sensor noise and odometry
+    sensor: str = "lidar"
+    width: int = 320
+    beams: int = 16
+    lidar_range: float = 30.0
+    noise: bool = True
+    rate: float = 5.0  # frames per second
+    speed: float = 0.5  # m/s
+    drift: float = 0.02
+
+    def __post_init__(self) -> None:
+        if self.sensor not in SENSORS:
+            raise InvalidInputError(f"sim.sensor must be one of {SENSORS}, got {self.sensor!r}")
+        if self.robots < 1 or self.width < 8 or self.beams < 1:
+            raise InvalidInputError("sim.robots >= 1, sim.width >= 8, sim.beams >= 1")
+        if not (self.lidar_range > 0 and self.rate > 0 and self.speed > 0 and self.drift >= 0):
+            raise InvalidInputError("sim.lidar_range, rate, speed > 0 and drift >= 0")
