@@ -160,12 +160,12 @@ def test_sim_command(tmp_path):
             "sim",
             "--robots",
             "2",
-            "--frames",
+            "--max-frames",
             "3",
-            "--width",
+            "--sensor",
+            "depth",
+            "--sim-width",
             "80",
-            "--height",
-            "60",
             "--out",
             str(tmp_path),
             "--json",
@@ -218,7 +218,7 @@ def route_length(world_name, robot):
 
 @pytest.mark.parametrize(
     ("sensor", "options"),
-    [("depth", ["--width", "80", "--height", "60"]), ("lidar", ["--beams", "4"])],
+    [("depth", ["--sim-width", "80"]), ("lidar", ["--beams", "4"])],
 )
 def test_info_on_a_sim_run(tmp_path, sensor, options):
     rate = 1.0  # one frame a second: a whole route in ~40 frames
@@ -241,7 +241,7 @@ def test_info_on_a_sim_run(tmp_path, sensor, options):
 
 
 def test_lidar_options_reach_the_sensor(tmp_path):
-    args = ["sim", "--sensor", "lidar", "--robots", "1", "--frames", "2", "--no-noise"]
+    args = ["sim", "--sensor", "lidar", "--robots", "1", "--max-frames", "2", "--no-noise"]
     result = CliRunner().invoke(
         main, [*args, "--beams", "3", "--lidar-range", "4", "--out", str(tmp_path)]
     )

@@ -13,6 +13,7 @@ from gmmap.fleet.transport import (
     TransportConfig,
     TransportConfigError,
     TransportError,
+    TransportOptions,
     alive_key,
     data_key,
     free_port,
@@ -20,6 +21,11 @@ from gmmap.fleet.transport import (
 )
 
 WAIT = 10.0  # generous: polling returns as soon as the condition holds
+
+
+def tconfig(fleet="lab", robot="a", **options) -> TransportConfig:
+    """A robot's transport configuration: its name and `TransportOptions`."""
+    return TransportConfig(fleet, robot, TransportOptions(**options))
 
 
 def wait_until(condition: Callable[[], bool], timeout: float = WAIT) -> bool:
@@ -56,8 +62,8 @@ def pair() -> Iterator[tuple[Transport, Transport]]:
     """Robots a and b of fleet "lab" on loopback; b connects to a."""
     port_a = free_port()
     with (
-        Transport(TransportConfig("lab", "a", port=port_a)) as a,
-        Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b,
+        Transport(tconfig("lab", "a", port=port_a)) as a,
+        Transport(tconfig("lab", "b", connect=[endpoint(port_a)])) as b,
     ):
         assert a.wait_for_peers(["b"], WAIT) and b.wait_for_peers(["a"], WAIT)
         yield a, b
@@ -106,33 +112,34 @@ def test_key_expressions():
 )
 def test_bad_config_raises_typed_error(kwargs):
     with pytest.raises(TransportConfigError) as info:
-        TransportConfig(**kwargs)
+        tconfig(**kwargs)
     assert isinstance(info.value, ValueError) and isinstance(info.value, TransportError)
 
 
 def test_good_config_normalises_endpoints():
-    cfg = TransportConfig(
+    cfg = tconfig(
         "lab",
         "robot-1.x_y",
         listen=["tcp/0.0.0.0:7447", "tcp/[::1]:7448"],
         connect=["tcp/peer.local:7447", "udp/10.0.0.2:7447#rel=1"],
     )
-    assert cfg.listen == ("tcp/0.0.0.0:7447", "tcp/[::1]:7448")
-    assert isinstance(cfg.connect, tuple) and not cfg.multicast_scouting and cfg.mode == "peer"
+    o = cfg.options
+    assert o.listen == ("tcp/0.0.0.0:7447", "tcp/[::1]:7448")
+    assert isinstance(o.connect, tuple) and not o.multicast_scouting and o.mode == "peer"
 
 
 def test_bad_zenoh_option_raises_config_error():
     with pytest.raises(TransportConfigError, match="Zenoh option"):
-        Transport(TransportConfig("lab", "a", zenoh_options={"no/such/option": 1}))
+        Transport(tconfig("lab", "a", zenoh_options={"no/such/option": 1}))
 
 
 def test_port_in_use_raises_transport_error():
     port = free_port()
     with (
-        Transport(TransportConfig("lab", "a", port=port)),
+        Transport(tconfig("lab", "a", port=port)),
         pytest.raises(TransportError, match="cannot open"),
     ):
-        Transport(TransportConfig("lab", "b", port=port))
+        Transport(tconfig("lab", "b", port=port))
 
 
 def test_exchange_submaps_and_count_bytes(pair):
@@ -169,11 +176,11 @@ def test_exchange_submaps_and_count_bytes(pair):
 def test_liveliness_join_and_leave():
     port_a = free_port()
     joined, left = queue.Queue(), queue.Queue()
-    with Transport(TransportConfig("lab", "a", port=port_a)) as a:
+    with Transport(tconfig("lab", "a", port=port_a)) as a:
         a.on_join(joined.put)
         a.on_leave(left.put)
         assert a.peers() == []
-        b = Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)]))
+        b = Transport(tconfig("lab", "b", connect=[endpoint(port_a)]))
         try:
             assert joined.get(timeout=WAIT) == "b"
             assert a.peers() == ["b"] and wait_until(lambda: b.peers() == ["a"])
@@ -193,7 +200,7 @@ def test_other_fleet_and_malformed_keys_are_ignored(pair):
     inbox = Inbox()
     a.subscribe(inbox)
     port_a = int(a.listen_endpoints[0].rsplit(":", 1)[1])
-    with Transport(TransportConfig("other", "c", listen=[], connect=[endpoint(port_a)])) as c:
+    with Transport(tconfig("other", "c", listen=[], connect=[endpoint(port_a)])) as c:
         assert c.listen_endpoints == ()
         # Fleets do not see each other's presence either.
         raw_cfg = zenoh.Config()
@@ -237,7 +244,7 @@ def test_fetch_what_was_missed(tmp_path: Path):
     port_a = free_port()
     with (
         Store(tmp_path / "a.db") as store,
-        Transport(TransportConfig("lab", "a", port=port_a)) as a,
+        Transport(tconfig("lab", "a", port=port_a)) as a,
     ):
         a.serve(store.fetch_provider)
         payloads = [bytes([seq]) * (100 + seq) for seq in range(4)]
@@ -246,7 +253,7 @@ def test_fetch_what_was_missed(tmp_path: Path):
             a.publish("submap", seq, payload)
         store.put_submap("z", 0, b"relayed")  # a also serves what it received from others
 
-        with Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b:
+        with Transport(tconfig("lab", "b", connect=[endpoint(port_a)])) as b:
             assert b.wait_for_peers(["a"], WAIT)
             got = b.fetch("a", "submap", 0, timeout=WAIT)
             assert got == list(enumerate(payloads))
@@ -269,13 +276,13 @@ def test_fetch_unknown_names_the_robots_a_newcomer_never_met(tmp_path: Path):
     port_a = free_port()
     with (
         Store(tmp_path / "a.db") as store,
-        Transport(TransportConfig("lab", "a", port=port_a)) as a,
+        Transport(tconfig("lab", "a", port=port_a)) as a,
     ):
         a.serve(store.fetch_provider, store.robots)
         store.put_submap("a", 0, b"own", own=True)
         store.put_submap("gone", 0, b"g0")
         store.put_submap("gone", 1, b"g1")
-        with Transport(TransportConfig("lab", "b", connect=[endpoint(port_a)])) as b:
+        with Transport(tconfig("lab", "b", connect=[endpoint(port_a)])) as b:
             assert b.wait_for_peers(["a"], WAIT)
             got = b.fetch_unknown({"a", "b"}, timeout=WAIT)
             assert got == {"gone": [(0, b"g0"), (1, b"g1")]}
@@ -312,7 +319,7 @@ def test_slow_provider_does_not_block_messages(pair):
 
 
 def test_bad_arguments_and_closed_transport():
-    with Transport(TransportConfig("lab", "a")) as a:
+    with Transport(tconfig("lab", "a")) as a:
         for args in [("sub/map", 0, b"x"), ("submap", -1, b"x"), ("submap", 0, "str")]:
             with pytest.raises(TransportConfigError):
                 a.publish(*args)

@@ -81,11 +81,13 @@ def read_folders(folders: tuple[Path, ...]) -> dict:
 
 def save_maps(maps: dict, out: Path) -> None:
     from gmmap.io import viz
+    from gmmap.io.datasets.ply import write_ply
 
     out.mkdir(parents=True, exist_ok=True)
     for ref, gmap in maps.items():
         gmap.save(out / f"globalmap_{ref}.npz")
-        gmap.save_ply(out / f"globalmap_{ref}.ply")
+        points = gmap.sample(200_000, seed=0)
+        write_ply(out / f"globalmap_{ref}.ply", points, comment=f"gmmap global map of {ref}")
         gmap.save_png(out / f"globalmap_{ref}.png")
         if viz.available():
             viz.save_rerun(gmap, out / f"globalmap_{ref}.rrd")

@@ -90,7 +90,8 @@ def command(
                 f"{line['received']} received, {line['matches']} matches, groups {line['groups']}"
             )
 
-    r = run_robot(config, frames, report_path, map_png, on_built, log)
+    on_map = (lambda gmap: save_map(gmap, map_png)) if map_png is not None else None
+    r = run_robot(config, frames, report_path, on_map, on_built, log)
     if report_path is not None:  # the effective configuration beside the report
         config.save(report_path.with_suffix(".config.yaml"))
     if truth_path is not None:
@@ -114,3 +115,15 @@ def _frames(data: Path | None, simulated: bool, index: int, stride: int | None, 
     if not 0 <= index < len(run):
         raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
     return run[index]
+
+
+def save_map(gmap, path: Path) -> dict:
+    """The merged map as a PNG and, with the viz extra, a Rerun recording beside it."""
+    from gmmap.io import viz
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    gmap.save_png(path)
+    saved = {"map_png": str(path)}
+    if viz.available():
+        saved["map_rrd"] = str(viz.save_rerun(gmap, path.with_suffix(".rrd")))
+    return saved

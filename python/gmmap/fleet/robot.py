@@ -144,6 +144,8 @@ class RobotNode:
         t.serve(self._serve, self.store.robots)
         t.subscribe(self._receive)
         t.on_join(self.fetch_queue.put)
+        with self._lock:
+            self._busy += 1  # the reloaded submaps, judged first by the matching stage
         for name, target in (
             ("match", self._matching),
             ("optimise", self._optimisation),
@@ -331,6 +333,9 @@ class RobotNode:
             self._judge(self._pending_reload)
         except Exception:
             log.exception("%s: matching the reloaded submaps failed", self.robot)
+        finally:
+            with self._lock:
+                self._busy -= 1
         while True:
             item = self.inbox.get()
             if item is None or self.stopping:

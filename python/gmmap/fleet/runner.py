@@ -17,6 +17,7 @@ from gmmap.mapping.frame import Frame
 
 if TYPE_CHECKING:
     from gmmap.mapping.backend import BackendResult
+    from gmmap.mapping.globalmap import GlobalMap
 
 try:
     import resource
@@ -28,12 +29,13 @@ def run_robot(
     config: Config,
     frames: Sequence[Frame],
     report_path: Path | None = None,
-    map_path: Path | None = None,
+    on_map: Callable[[GlobalMap], dict] | None = None,
     on_built: BuiltCallback | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> dict:
     """Run a node over ``frames``, linger, report, shut down. SIGINT/SIGTERM stop it cleanly
-    (the report is still written, with what was done)."""
+    (the report is still written, with what was done). ``on_map`` receives the merged map of
+    the robot's group at the end (to save it) and returns what to add to the report."""
     import signal
 
     say = progress or (lambda _m: None)
@@ -66,8 +68,9 @@ def run_robot(
         node.linger(config.robot.linger)
         report = node.report()
         report["interrupted"] = stopped.is_set()
-        if map_path is not None and not stopped.is_set():
-            report.update(_save_map(node, map_path))
+        gmap = node.global_map() if on_map is not None and not stopped.is_set() else None
+        if gmap is not None:
+            report.update(on_map(gmap))
         if report_path is not None:
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
@@ -76,20 +79,6 @@ def run_robot(
         for sig, handler in old.items():
             signal.signal(sig, handler)
     return report
-
-
-def _save_map(node: RobotNode, path: Path) -> dict:
-    gmap = node.global_map()
-    if gmap is None:
-        return {}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    gmap.save_png(path)
-    saved = {"map_png": str(path)}
-    from gmmap.io import viz
-
-    if viz.available():  # the optional viz extra: a Rerun recording beside it
-        saved["map_rrd"] = str(viz.save_rerun(gmap, path.with_suffix(".rrd")))
-    return saved
 
 
 def node_report(node: RobotNode) -> dict:
@@ -120,9 +109,9 @@ def node_report(node: RobotNode) -> dict:
         "backend_accepted": len(result.accepted) if result else 0,
         "backend_rejected": len(result.rejected) if result else 0,
         "groups": node.groups(),
-        "reference": {r: frames.reference(r) for r in frames.robots()} if result else {},
+        "reference": {r: frames.reference(r) for r in frames.robots} if result else {},
         "to_reference": (
-            {r: np.asarray(frames.to_reference(r)).tolist() for r in frames.robots()}
+            {r: np.asarray(frames.to_reference(r)).tolist() for r in frames.robots}
             if result
             else {}
         ),

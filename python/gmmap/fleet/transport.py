@@ -61,6 +61,7 @@ __all__ = [
     "TransportConfig",
     "TransportConfigError",
     "TransportError",
+    "TransportOptions",
     "alive_key",
     "data_key",
     "free_port",

@@ -61,11 +61,6 @@ class GlobalMap:
         """The project's GMM file (``Gmm.load`` reads it)."""
         self.gmm.save(path)
 
-    def save_ply(self, path: str | os.PathLike, n: int = 200_000, seed: int = 0) -> None:
-        from gmmap.io.datasets.ply import write_ply
-
-        write_ply(path, self.sample(n, seed), comment=f"gmmap global map of {self.reference}")
-
     def save_png(
         self,
         path: str | os.PathLike,

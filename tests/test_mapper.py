@@ -1,0 +1,83 @@
+"""One pipeline: the robot node and the offline merge judge the same pairs and optimise alike."""
+
+import numpy as np
+import pytest
+
+from conftest import BUNDLED_TUM_SLICE
+from gmmap.config import Config
+from gmmap.eval.merge import merge
+from gmmap.fleet.codec import decode, encode
+from gmmap.fleet.robot import RobotNode
+from gmmap.fleet.store import Store
+from gmmap.io.datasets.tum import TumRgbd
+from gmmap.mapping.mapper import Mapper
+from gmmap.mapping.submap import build_submaps
+from gmmap.options import BuildOptions, PlaceOptions, RobotOptions
+
+# Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
+CONFIG = Config(
+    build=BuildOptions(frames_per_submap=2, n_components=60),
+    place=PlaceOptions(min_confidence=0.55),
+)
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    """Two robots' submaps as they cross the wire: encoded bytes and their decoded copies."""
+    frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)
+    payloads = {
+        name: [encode(s) for s in build_submaps(frames[part], name, CONFIG.build)]
+        for name, part in (("a", slice(0, 4)), ("b", slice(4, 8)))
+    }
+    return payloads, {r: [decode(p) for p in ps] for r, ps in payloads.items()}
+
+
+def judged(mapper: Mapper) -> dict:
+    return {
+        (m.query, (m.candidate.robot, m.candidate.seq)): (m.accepted, m.registration.transform)
+        for m in mapper.matches
+    }
+
+
+def test_robot_node_and_merge_give_the_same_matches_and_poses(tmp_path, recorded):
+    payloads, submaps = recorded
+    offline, report = merge(submaps, CONFIG)
+    assert report["groups"] == [["a", "b"]]
+    # A node whose store holds the same submaps (its own a's, b's received) judges them when
+    # it starts: the same pairs, the same registrations, the same optimised poses.
+    with Store(tmp_path / "a.db") as store:
+        for robot, ps in payloads.items():
+            for seq, p in enumerate(ps):
+                store.put_submap(robot, seq, p, own=robot == "a")
+    config = Config(
+        build=CONFIG.build,
+        place=CONFIG.place,
+        robot=RobotOptions(name="a", fleet="same", store=str(tmp_path / "a.db")),
+    )
+    node = RobotNode(config)
+    try:
+        node.start()
+        assert node.drain(30)
+        online = node.mapper
+        ours, theirs = judged(online), judged(offline)
+        assert ours.keys() == theirs.keys() and len(ours) >= 1
+        for pair, (accepted, transform) in theirs.items():
+            assert ours[pair][0] == accepted
+            np.testing.assert_allclose(ours[pair][1], transform, atol=1e-12)
+        assert sorted(online.result.accepted) == sorted(offline.result.accepted)
+        assert online.frames.groups() == offline.frames.groups()
+        for key, pose in offline.result.poses.items():
+            np.testing.assert_allclose(online.result.poses[key], pose, atol=1e-6)
+        assert len(node.store.edges()) == len(ours)  # every judged pair is stored
+    finally:
+        node.stop()
+
+
+def test_a_mapper_judges_each_pair_once(recorded):
+    _, submaps = recorded
+    mapper = Mapper(CONFIG)
+    first = mapper.add(submaps["a"] + submaps["b"])
+    assert first and mapper.add(submaps["b"]) == []  # held already: nothing new to judge
+    mapper.optimize()
+    assert mapper.frames.groups() == [["a", "b"]]
+    assert mapper.global_map("b").reference == "a"
