@@ -26,14 +26,19 @@ test: install
 	cargo test -p gmmap-core
 	$(BIN)/python -m pytest
 
+# The layer rules (tests/test_layers.py) run with the tests.
 lint: install
 	cargo fmt --check
 	PYO3_PYTHON=$(abspath $(BIN)/python) cargo clippy --workspace --all-targets -- -D warnings
 	$(BIN)/ruff check python tests benchmarks
 	$(BIN)/ruff format --check python tests benchmarks
 
+# Every benchmark prints one JSON object; docs/benchmarks.md is generated from them.
+BENCHMARKS := em raycast loaders selection codec registration place merge backend planner fleet
+
 bench: install
-	for b in em raycast loaders selection; do $(BIN)/python benchmarks/$$b.py > bench-$$b.json || exit 1; done
+	for b in $(BENCHMARKS); do $(BIN)/python benchmarks/$$b.py > bench-$$b.json || exit 1; done
+	$(BIN)/python benchmarks/report.py
 
 clean:
 	rm -rf $(VENV) target

@@ -31,9 +31,9 @@ import time
 import gtsam
 import numpy as np
 
-from gmmap.mapping.backend import BackendOptions, PoseGraph, adjoint, right_information
+from gmmap.mapping.backend import BackendOptions, PoseGraph
 from gmmap.math.drift import Drift, apply_drift
-from gmmap.math.geometry import invert, rotation_angle, so3_exp
+from gmmap.math.geometry import adjoint, invert, right_information, rotation_angle, so3_exp
 
 MATCH_SIGMA_R = 0.01
 MATCH_SIGMA_T = 0.03

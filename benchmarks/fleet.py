@@ -21,7 +21,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from gmmap.cli.demo import run_demo
+from gmmap.cli.demo import backend_follows_drift, run_demo
+from gmmap.config import Config
+from gmmap.options import RobotOptions, SimOptions
 
 
 def per_robot(values: dict) -> dict:
@@ -42,13 +44,10 @@ def main() -> None:
     rows = []
     for n in (int(x) for x in args.robots.split(",")):
         with tempfile.TemporaryDirectory() as out:
-            r = run_demo(
-                robots=n,
-                max_frames=args.max_frames,
-                linger=3.0,
-                out=Path(out),
-                log=lambda m: print(m, file=sys.stderr),
+            config = backend_follows_drift(
+                Config(sim=SimOptions(robots=n), robot=RobotOptions(linger=3.0))
             )
+            r = run_demo(config, args.max_frames, Path(out), lambda m: print(m, file=sys.stderr))
         res = r["resources"]
         bpsm = r["bytes_per_submap"]
         submaps_per_robot = r["submaps"] / n

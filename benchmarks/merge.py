@@ -1,4 +1,4 @@
-"""Merge: issue 7's figures from the offline pipeline (`gmmap.mapping.mapper.merge`), in one run.
+"""Merge: issue 7's figures from the offline pipeline (`gmmap.eval.merge.merge`), in one run.
 
 Prints one JSON object. Each case builds full-covariance 20-frame submaps per robot and merges
 them; against ground truth: every robot pair's relative pose where they met and of their map
@@ -21,10 +21,11 @@ import os
 import sys
 from pathlib import Path
 
+from gmmap.config import Config
+from gmmap.eval.merge import merge
 from gmmap.io import datasets
 from gmmap.io.sim import UP, get_world, robot_sensor, simulate
 from gmmap.mapping.backend import BackendOptions
-from gmmap.mapping.mapper import MergeOptions, merge
 from gmmap.mapping.submap import BuildOptions, build_submaps
 from gmmap.math.drift import Drift
 
@@ -37,8 +38,8 @@ KEYS = ("groups", "candidates", "verified", "accepted_edges", "rejected_edges", 
         "ate_aligned_after_m", "injected_wrong", "time_s")  # fmt: skip
 
 
-def run(submaps: dict, options: MergeOptions) -> dict:
-    report = merge(submaps, options).report(submaps)
+def run(submaps: dict, config: Config | None = None, wrong_matches: float = 0.0) -> dict:
+    _, report = merge(submaps, config, wrong_matches=wrong_matches)
     return {k: report[k] for k in KEYS if k in report}
 
 
@@ -53,16 +54,16 @@ def main() -> None:
             for name, part in (("first", slice(0, 398)), ("second", slice(398, None)))
         }
         for drift in (0.02, 0.002):
-            options = MergeOptions(backend=BackendOptions.for_drift(drift))
-            out[f"tum_fr1_xyz_halves_odometry_drift_{drift}"] = run(halves, options)
+            config = Config(backend=BackendOptions.for_drift(drift))
+            out[f"tum_fr1_xyz_halves_odometry_drift_{drift}"] = run(halves, config)
     else:
         out["tum_fr1_xyz_halves"] = {"skipped": f"{fr1} not found"}
     print("simulated office, 3 robots", file=sys.stderr)
     odometry = Drift(seed=0, up=UP)
     run_ = simulate(get_world("office"), 3, 0, robot_sensor("lidar"), odometry=odometry)
     robots = {r.name: list(build_submaps(r, r.name, BUILD)) for r in run_}
-    out["office_3_robots"] = run(robots, MergeOptions())
-    out["office_3_robots_wrong_0.2"] = run(robots, MergeOptions(wrong_matches=0.2))
+    out["office_3_robots"] = run(robots)
+    out["office_3_robots_wrong_0.2"] = run(robots, wrong_matches=0.2)
     print(json.dumps(out, indent=1))
 
 

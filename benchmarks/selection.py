@@ -59,7 +59,9 @@ def selection_figures(frames, frames_per_submap: int) -> dict:
     from gmmap.mapping.submap import BuildOptions, build_submaps, select_and_refine
     from gmmap.math.select import SelectOptions, select_components
 
-    opts = BuildOptions(frames_per_submap=frames_per_submap, select=False, holdout=0.1)
+    opts = BuildOptions(
+        frames_per_submap=frames_per_submap, covariance="diag", select=False, holdout=0.1
+    )
     submaps = list(build_submaps(frames, "bench", opts))[:6]
     rows, sweep = [], {(t, r): [] for t in THRESHOLDS for r in (False, True)}
     for s in submaps:
@@ -67,8 +69,8 @@ def selection_figures(frames, frames_per_submap: int) -> dict:
         held, train = s.points[mask], s.points[~mask]
         before = s.gmm.score(held)
         for t, refined in sweep:
-            o = BuildOptions(selection=SelectOptions(kl_threshold=t), refine_iter=10 * refined)
-            g = select_and_refine(s.gmm, train, o)
+            o = BuildOptions(covariance="diag", refine_iter=10 * refined)
+            g = select_and_refine(s.gmm, train, o, SelectOptions(kl_threshold=t))
             sweep[t, refined].append(
                 (
                     1 - len(g) / len(s.gmm),
@@ -77,7 +79,7 @@ def selection_figures(frames, frames_per_submap: int) -> dict:
                 )
             )
         paper = select_components(s.gmm)
-        g = select_and_refine(s.gmm, train, BuildOptions())
+        g = select_and_refine(s.gmm, train, BuildOptions(covariance="diag"))
         rows.append(
             {
                 "seq": s.seq,
@@ -128,7 +130,9 @@ from gmmap.mapping.submap import BuildOptions, SubmapBuilder
 frames = open_data(sys.argv[1], stride=int(sys.argv[2]))[:40]
 times = []
 for rep in range(3):
-    b = SubmapBuilder(options=BuildOptions(frames_per_submap=40, min_novelty=0.0))
+    b = SubmapBuilder(
+        options=BuildOptions(frames_per_submap=40, covariance="diag", min_novelty=0.0)
+    )
     start = time.perf_counter()
     for f in frames:
         s = b.add(f)
@@ -173,7 +177,11 @@ def fig2() -> dict:
         gmms = []
         for robot in run:
             opts = BuildOptions(
-                frames_per_submap=len(robot), strategy=strategy, min_novelty=0.0, select=False
+                frames_per_submap=len(robot),
+                strategy=strategy,
+                covariance="diag",
+                min_novelty=0.0,
+                select=False,
             )
             (s,) = build_submaps([robot[i] for i in range(len(robot))], robot.name, opts)
             gmms.append(s.gmm.transform(s.gt_anchor))

@@ -7,17 +7,17 @@ import numpy as np
 import pytest
 
 from gmmap.errors import InvalidInputError
-from gmmap.mapping.backend import (
-    BackendOptions,
-    PoseGraph,
-    adjoint,
-    chi2_quantile,
-    max_clique,
-    right_information,
-    se3_log,
-)
+from gmmap.mapping.backend import BackendOptions, PoseGraph
+from gmmap.mapping.consistency import chi2_quantile, max_clique
 from gmmap.math.drift import Drift, apply_drift
-from gmmap.math.geometry import invert, rotation_angle, so3_exp
+from gmmap.math.geometry import (
+    adjoint,
+    invert,
+    right_information,
+    rotation_angle,
+    se3_log,
+    so3_exp,
+)
 
 N = 30  # submaps per robot: one lap of a circle each
 SIGMA_R, SIGMA_T = 0.005, 0.02  # match noise

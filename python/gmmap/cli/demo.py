@@ -26,9 +26,6 @@ import numpy as np
 
 from gmmap.cli.common import as_json_option, config_option, log, setting, sim_settings
 from gmmap.config import Config
-from gmmap.eval.pairs import describe_pair, match_errors, pair_errors
-from gmmap.eval.registration import describe_match_errors
-from gmmap.fleet.transport import free_port
 from gmmap.options import SimOptions, drift_overrides
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
@@ -39,6 +36,8 @@ def run_demo(
 ) -> dict:
     """Runs ``config.sim.robots`` robot processes, each started with its own configuration
     file (this tree with its name, store and endpoints), and summarises their reports."""
+    from gmmap.fleet.transport import free_port
+
     start = time.perf_counter()
     if out is None:
         out = Path(tempfile.mkdtemp(prefix="gmmap-demo-"))
@@ -129,6 +128,7 @@ def _relay(proc: subprocess.Popen, log) -> None:
 def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOptions) -> dict:
     """The demo's report from the robots' reports, their anchors' ground truth (``anchors``:
     robot → seq → 4x4) and the simulator's map frames."""
+    from gmmap.eval.pairs import match_errors, pair_errors
     from gmmap.io.sim import simulate_options
 
     truth = {r.name: r.map_to_world for r in simulate_options(sim)}
@@ -209,6 +209,9 @@ def _registered(reports: dict[str, dict]) -> list:
 
 
 def format_report(r: dict) -> str:
+    from gmmap.eval.pairs import describe_pair
+    from gmmap.eval.registration import describe_match_errors
+
     b = r["bytes_per_submap"]
     lines = [
         f"robots          {r['robots']} in {r['world']}, {r['submaps']} submaps",
@@ -257,12 +260,12 @@ def command(max_frames: int | None, out: Path | None, config: Config, as_json: b
 
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
-    config = _backend_follows_drift(config)
+    config = backend_follows_drift(config)
     r = run_demo(config, max_frames, out, log)
     click.echo(json.dumps(r) if as_json else format_report(r))
 
 
-def _backend_follows_drift(config: Config) -> Config:
+def backend_follows_drift(config: Config) -> Config:
     b, default = config.backend, Config().backend
     if any(getattr(b, k) != getattr(default, k) for k in drift_overrides(0.0)):
         return config  # the configuration chose its odometry noise

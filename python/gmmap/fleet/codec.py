@@ -54,6 +54,29 @@ import numpy as np
 import zstandard
 
 from gmmap.errors import DecodeError, InvalidGmmError, InvalidInputError
+from gmmap.fleet.bitstream import (
+    _BitReader,
+    _BitWriter,
+    _Reader,
+    _rice_read,
+    _rice_write,
+    _tb_read,
+    _tb_write,
+    _Writer,
+)
+from gmmap.fleet.quantise import (
+    _bin,
+    _bin_centre,
+    _dot,
+    _from_octahedral,
+    _half_circle,
+    _morton,
+    _octahedral,
+    _pexp,
+    _rotation,
+    _tangents,
+    _unmorton,
+)
 from gmmap.math.gmm import Gmm
 
 if TYPE_CHECKING:
@@ -194,79 +217,6 @@ def _zstd_decompress(frame: bytes) -> bytes:
     return body
 
 
-# --- byte-level fields -----------------------------------------------------------------------
-
-
-class _Writer:
-    def __init__(self) -> None:
-        self.buf = bytearray()
-
-    def u8(self, v: int) -> None:
-        self.buf.append(v)
-
-    def i8(self, v: int) -> None:
-        self.buf += struct.pack("<b", v)
-
-    def uvarint(self, v: int) -> None:
-        while v >= 0x80:
-            self.buf.append((v & 0x7F) | 0x80)
-            v >>= 7
-        self.buf.append(v)
-
-    def svarint(self, v: int) -> None:
-        self.uvarint(-2 * v - 1 if v < 0 else 2 * v)  # zigzag
-
-    def raw(self, b: bytes) -> None:
-        self.buf += b
-
-
-class _Reader:
-    """Bounds-checked reads from a byte string; every failure is a DecodeError."""
-
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-        self.pos = 0
-
-    def take(self, n: int, what: str) -> bytes:
-        if n < 0 or self.pos + n > len(self.data):
-            raise DecodeError(f"truncated message: {what} needs {n} bytes")
-        out = self.data[self.pos : self.pos + n]
-        self.pos += n
-        return out
-
-    def u8(self, what: str) -> int:
-        return self.take(1, what)[0]
-
-    def i8(self, what: str) -> int:
-        return struct.unpack("<b", self.take(1, what))[0]
-
-    def uvarint(self, what: str, limit: int) -> int:
-        v, shift = 0, 0
-        while True:
-            b = self.u8(what)
-            v |= (b & 0x7F) << shift
-            if not b & 0x80:
-                break
-            shift += 7
-            if shift > 63:
-                raise DecodeError(f"{what}: varint longer than 64 bits")
-        if v > limit:
-            raise DecodeError(f"{what} = {v} exceeds {limit}")
-        return v
-
-    def svarint(self, what: str, limit: int) -> int:
-        z = self.uvarint(what, 2 * limit + 1)
-        v = (z >> 1) ^ -(z & 1)
-        if abs(v) > limit:
-            raise DecodeError(f"{what} = {v} exceeds ±{limit}")
-        return v
-
-    def rest(self) -> bytes:
-        out = self.data[self.pos :]
-        self.pos = len(self.data)
-        return out
-
-
 # --- submap fields ---------------------------------------------------------------------------
 
 
@@ -383,83 +333,7 @@ def _read_anchor(r: _Reader) -> np.ndarray:
     return np.vstack([np.reshape(top, (3, 4)), [0.0, 0.0, 0.0, 1.0]])
 
 
-# --- bit streams -----------------------------------------------------------------------------
-
-
-class _BitWriter:
-    """Bits, least significant first within each byte; values LSB first."""
-
-    def __init__(self) -> None:
-        self.chunks: list[np.ndarray] = []
-
-    def fixed(self, values: np.ndarray, widths: np.ndarray | int) -> None:
-        values = np.asarray(values, dtype=np.uint64).reshape(-1)
-        widths = np.broadcast_to(np.asarray(widths, dtype=np.int64), values.shape)
-        if values.size == 0 or int(widths.max()) == 0:
-            return
-        for start in range(0, values.size, 8192):  # blocks bound the (n, width) temporaries
-            v, wd = values[start : start + 8192], widths[start : start + 8192]
-            j = np.arange(int(wd.max()), dtype=np.uint64)
-            bits = ((v[:, None] >> j) & np.uint64(1)).astype(np.uint8)
-            self.chunks.append(bits[j[None, :].astype(np.int64) < wd[:, None]])
-
-    def unary(self, q: np.ndarray) -> None:
-        """q ones, then a zero, for each q."""
-        q = np.asarray(q, dtype=np.int64)
-        bits = np.ones(int(q.sum()) + len(q), dtype=np.uint8)
-        bits[np.cumsum(q + 1) - 1] = 0
-        self.chunks.append(bits)
-
-    def tobytes(self) -> bytes:
-        if not self.chunks:
-            return b""
-        return np.packbits(np.concatenate(self.chunks), bitorder="little").tobytes()
-
-
-class _BitReader:
-    """Reads a little-endian bit stream; fixed-width fields (≤ 56 bits) come from 64-bit
-    windows gathered per field, so a read is a handful of vectorised operations."""
-
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-        self.bytes = np.frombuffer(data + bytes(8), dtype=np.uint8)  # any window is in range
-        self.nbits = 8 * len(data)
-        self.pos = 0
-
-    def fixed(self, widths: np.ndarray) -> np.ndarray:
-        widths = np.asarray(widths, dtype=np.int64)
-        total = int(widths.sum())
-        if self.pos + total > self.nbits:
-            raise DecodeError("truncated bit stream")
-        starts = self.pos + np.cumsum(widths) - widths
-        windows = self.bytes[(starts >> 3)[:, None] + _WINDOW].view("<u8")[:, 0]
-        masks = (np.uint64(1) << widths.astype(np.uint64)) - np.uint64(1)
-        self.pos += total
-        return ((windows >> (starts & 7).astype(np.uint64)) & masks).astype(np.int64)
-
-    def unary(self, n: int) -> np.ndarray:
-        """n unary codes (q ones, then a zero)."""
-        if n == 0:
-            return np.zeros(0, dtype=np.int64)
-        first = self.pos >> 3
-        bits = np.unpackbits(self.bytes[first : len(self.data)], bitorder="little")
-        ends = np.flatnonzero(bits[self.pos - 8 * first :] == 0)[:n]
-        if len(ends) < n:
-            raise DecodeError("truncated bit stream (unary code)")
-        self.pos += int(ends[-1]) + 1
-        q = ends.copy()
-        q[1:] -= ends[:-1] + 1
-        return q
-
-    def finish(self) -> None:
-        """The stream must end in its last byte, padded with zero bits."""
-        if self.nbits - self.pos >= 8:
-            raise DecodeError(f"{(self.nbits - self.pos) // 8} unexpected trailing bytes")
-        if self.pos < self.nbits and self.data[-1] >> (self.pos & 7):
-            raise DecodeError("non-zero padding bits")
-
-
-_WINDOW = np.arange(8)
+# --- Rice parameters ------------------------------------------------------------------------
 
 
 def _rice_k(x: np.ndarray) -> int:
@@ -469,102 +343,7 @@ def _rice_k(x: np.ndarray) -> int:
     return int(np.argmin(costs))
 
 
-def _rice_write(bw: _BitWriter, streams: np.ndarray, ks: np.ndarray) -> None:
-    """Rice codes of the rows of ``streams`` (rows × n), row i with parameter ks[i]: first all
-    quotients (unary, row after row), then all remainders, so both halves decode vectorised."""
-    bw.unary((streams >> ks[:, None]).reshape(-1))
-    bw.fixed(
-        (streams & ((np.int64(1) << ks[:, None]) - 1)).reshape(-1), np.repeat(ks, streams.shape[1])
-    )
-
-
-def _rice_read(br: _BitReader, n: int, ks: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """Reads what ``_rice_write`` wrote: len(ks) rows of n values, row i at most limits[i]."""
-    q = br.unary(len(ks) * n).reshape(len(ks), n)
-    if (q > (limits >> ks)[:, None]).any():
-        raise DecodeError("Rice-coded value out of range")
-    x = (q << ks[:, None]) | br.fixed(np.repeat(ks, n)).reshape(len(ks), n)
-    if (x > limits[:, None]).any():
-        raise DecodeError("Rice-coded value out of range")
-    return x
-
-
-def _bit_length(v: np.ndarray) -> np.ndarray:
-    """Bits needed for each non-negative integer below 2^52 (exact: frexp, not log2)."""
-    return np.frexp(np.asarray(v, dtype=np.float64))[1].astype(np.int64)
-
-
-def _tb_write(bw: _BitWriter, x: np.ndarray, radix: np.ndarray) -> None:
-    """Truncated binary codes of 0 ≤ x < radix (radix 1 takes no bits): prefixes of b - 1 bits
-    for all values first, then the one extra bit of those that need it."""
-    x, radix = np.asarray(x, np.int64).reshape(-1), np.asarray(radix, np.int64).reshape(-1)
-    b = _bit_length(radix - 1)
-    u = (np.int64(1) << b) - radix  # values below u take b - 1 bits
-    extra = (radix > 1) & (x >= u)
-    y = x + u
-    bw.fixed(np.where(extra, y >> 1, x), np.maximum(b - 1, 0))
-    bw.fixed(y[extra] & 1, 1)
-
-
-def _tb_read(br: _BitReader, radix: np.ndarray) -> np.ndarray:
-    radix = np.asarray(radix, np.int64).reshape(-1)
-    b = _bit_length(radix - 1)
-    u = (np.int64(1) << b) - radix
-    prefix = br.fixed(np.maximum(b - 1, 0))
-    extra = (radix > 1) & (prefix >= u)
-    out = prefix.copy()
-    out[extra] = 2 * prefix[extra] + br.fixed(np.ones(int(extra.sum()), np.int64)) - u[extra]
-    return out  # always < radix: truncated binary has no invalid codes
-
-
-# --- Morton codes ----------------------------------------------------------------------------
-
-_SPREAD = (
-    (32, 0x1F00000000FFFF),
-    (16, 0x1F0000FF0000FF),
-    (8, 0x100F00F00F00F00F),
-    (4, 0x10C30C30C30C30C3),
-    (2, 0x1249249249249249),
-)
-
-
-def _spread(v: np.ndarray) -> np.ndarray:
-    x = v.astype(np.uint64) & np.uint64(0x1FFFFF)
-    for shift, mask in _SPREAD:
-        x = (x | (x << np.uint64(shift))) & np.uint64(mask)
-    return x
-
-
-def _compact(x: np.ndarray) -> np.ndarray:
-    x = x & np.uint64(0x1249249249249249)
-    x = (x ^ (x >> np.uint64(2))) & np.uint64(0x10C30C30C30C30C3)
-    x = (x ^ (x >> np.uint64(4))) & np.uint64(0x100F00F00F00F00F)
-    x = (x ^ (x >> np.uint64(8))) & np.uint64(0x1F0000FF0000FF)
-    x = (x ^ (x >> np.uint64(16))) & np.uint64(0x1F00000000FFFF)
-    x = (x ^ (x >> np.uint64(32))) & np.uint64(0x1FFFFF)
-    return x.astype(np.int64)
-
-
-def _morton(cells: np.ndarray) -> np.ndarray:
-    c = cells.astype(np.uint64)
-    m = _spread(c[:, 0]) | (_spread(c[:, 1]) << np.uint64(1)) | (_spread(c[:, 2]) << np.uint64(2))
-    return m.astype(np.int64)
-
-
-def _unmorton(m: np.ndarray) -> np.ndarray:
-    return _compact(m.astype(np.uint64)[:, None] >> np.arange(3, dtype=np.uint64))
-
-
-# --- geometry shared by encoder and decoder (IEEE basic operations only) ---------------------
-
-
-def _pexp(x: np.ndarray) -> np.ndarray:
-    """exp(x) as (1 + x/2^16)^(2^16) by 16 squarings: within 1 % for |x| ≤ 14, and, unlike libm's
-    exp, the same bits on every platform. Used only where a decoder derives a radix."""
-    y = 1.0 + x * (1.0 / 65536.0)
-    for _ in range(16):
-        np.multiply(y, y, out=y)
-    return y
+# --- steps and radices shared by encoder and decoder (IEEE basic operations only) -----------
 
 
 def _log_stds(floor: float, gaps: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -602,81 +381,6 @@ def _steps(n: np.ndarray, logstd: np.ndarray, qmin: float) -> tuple[np.ndarray, 
 
 def _radix(x: np.ndarray) -> np.ndarray:
     return np.clip(np.ceil(x), 1, RADIX_CAP).astype(np.int64)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-
-
-def _normalised(v: np.ndarray) -> np.ndarray:
-    return v / np.sqrt(_dot(v, v))[:, None]
-
-
-def _bin(t: np.ndarray, radix: np.ndarray) -> np.ndarray:
-    """The bin of t ∈ [-1, 1] among ``radix`` equal bins."""
-    return np.clip(np.floor((t + 1.0) * 0.5 * radix), 0, radix - 1).astype(np.int64)
-
-
-def _bin_centre(j: np.ndarray, radix: np.ndarray) -> np.ndarray:
-    return (2.0 * j + 1.0) / radix - 1.0
-
-
-def _octahedral(normal: np.ndarray) -> np.ndarray:
-    """A unit vector (sign free: the upper hemisphere) as (u, v) ∈ [-1, 1]²."""
-    n = np.where(normal[:, 2:3] < 0, -normal, normal)
-    p = n[:, :2] / (np.abs(n[:, 0]) + np.abs(n[:, 1]) + n[:, 2])[:, None]
-    return np.stack([p[:, 0] + p[:, 1], p[:, 0] - p[:, 1]], axis=1)
-
-
-def _from_octahedral(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    n = np.empty((len(u), 3))
-    n[:, 0] = (u + v) * 0.5
-    n[:, 1] = (u - v) * 0.5
-    n[:, 2] = 1.0 - np.abs(n[:, 0]) - np.abs(n[:, 1])
-    return _normalised(n)
-
-
-def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A right-handed basis (t₁, t₂) of the plane normal to n: t₁ ∝ n × x̂, or n × ŷ when n is
-    within 53° of x̂."""
-    with_x = np.abs(n[:, 0]) < 0.6
-    t1 = np.zeros((len(n), 3))
-    t1[:, 0] = np.where(with_x, 0.0, -n[:, 2])  # n × x̂ = (0, n_z, −n_y)
-    t1[:, 1] = np.where(with_x, n[:, 2], 0.0)  # n × ŷ = (−n_z, 0, n_x)
-    t1[:, 2] = np.where(with_x, -n[:, 1], n[:, 0])
-    t1 = _normalised(t1)
-    return t1, _cross(n, t1)
-
-
-def _half_circle(c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """A direction (c, s) in the plane, sign free, as t ∈ [-1, 1] on the upper half diamond."""
-    flip = (s < 0) | ((s == 0) & (c < 0))
-    c, s = np.where(flip, -c, c), np.where(flip, -s, s)
-    den = np.abs(c) + s
-    return np.where(den > 0, c / np.where(den > 0, den, 1.0), 0.0)
-
-
-def _rotation(normal: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The proper rotation [n, e₂, e₃] (columns, ascending σ) from the normal and the largest
-    axis' half-diamond coordinate."""
-    t1, t2 = _tangents(normal)
-    c, s = t, 1.0 - np.abs(t)
-    norm = np.sqrt(c * c + s * s)
-    e3 = (c / norm)[:, None] * t1 + (s / norm)[:, None] * t2
-    R = np.empty((len(t), 3, 3))
-    R[:, :, 0], R[:, :, 1], R[:, :, 2] = normal, _cross(e3, normal), e3
-    return R
 
 
 def _mean_radices(R: np.ndarray, step: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:

@@ -45,7 +45,6 @@ mean), but it cannot run GNC or drop a rejected factor cheaply, so it is not use
 from __future__ import annotations
 
 import bisect
-import heapq
 import itertools
 import math
 import time
@@ -55,7 +54,22 @@ import gtsam
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.math.geometry import invert, rotation_angle
+from gmmap.mapping.consistency import (
+    by_robot_pair,
+    chi2_quantile,
+    components,
+    drift_prefix,
+    max_clique,
+    pairwise_mahalanobis,
+)
+from gmmap.mapping.solver import better, shortest_path_frames, solve
+from gmmap.math.geometry import (
+    invert,
+    project_rigid,
+    right_information,
+    rigid_matrix,
+    rotation_angle,
+)
 from gmmap.options import BackendOptions
 
 Node = tuple[str, int]
@@ -156,7 +170,7 @@ class PoseGraph:
         node = (str(robot), int(seq))
         if node in self._anchors:
             raise InvalidInputError(f"submap {node} was already added")
-        self._anchors[node] = _rigid_matrix(anchor, f"anchor of {node}")
+        self._anchors[node] = rigid_matrix(anchor, f"anchor of {node}")
         self._key[node] = len(self._key)
         seqs = self._seqs.setdefault(node[0], [])
         if seqs and node[1] < seqs[-1]:
@@ -181,7 +195,7 @@ class PoseGraph:
                 raise InvalidInputError(f"match refers to unknown submap {node}")
         if target == source:
             raise InvalidInputError(f"match from {target} to itself")
-        T = _rigid_matrix(transform, "match transform")
+        T = rigid_matrix(transform, "match transform")
         cov = self._match_covariance(information)
         if confidence is not None and not math.isfinite(confidence):
             raise InvalidInputError(f"confidence must be finite, got {confidence}")
@@ -212,34 +226,12 @@ class PoseGraph:
         """Selects consistent matches (PCM), solves (GNC or LM) from the last
         estimate and returns poses, frames and the accepted/rejected edges."""
         start = time.perf_counter()
-        o = self.options
-        rejected: dict[int, str] = {}
-        candidates = list(self._matches)
         t_pcm = time.perf_counter()
-        exact = True
-        if o.pcm:
-            kept: list[Match] = []
-            for key, pair in _by_robot_pair(candidates).items():
-                ids = tuple(m.id for m in pair)
-                cached = self._pcm_cache.get(key)
-                if cached and cached[:2] == (ids, self._odometry_version):
-                    inliers, pair_exact = cached[2], cached[3]
-                else:
-                    inliers, pair_exact = self._pcm(pair)
-                    self._pcm_cache[key] = (ids, self._odometry_version, inliers, pair_exact)
-                exact &= pair_exact
-                kept += [pair[k] for k in inliers]
-                rejected.update({pair[k].id: "pcm" for k in set(range(len(pair))) - inliers})
-            candidates = sorted(kept, key=lambda m: m.id)
-        if o.min_matches > 1:
-            for (a, b), pair in _by_robot_pair(candidates).items():
-                if a != b and len(pair) < o.min_matches:
-                    rejected.update({m.id: "pending" for m in pair})
-            candidates = [m for m in candidates if m.id not in rejected]
+        candidates, rejected, exact = self._select()
         t_pcm = time.perf_counter() - t_pcm
 
         t_opt = time.perf_counter()
-        groups = _components(self.robots, candidates)
+        groups = components(self.robots, candidates)
         reference = {r: g[0] for g in groups for r in g}
         graph, initial, n_known = self._build(candidates, reference)
         values, weights, solver = self._solve(graph, initial, n_known, candidates)
@@ -249,7 +241,7 @@ class PoseGraph:
             cold = self._build(candidates, reference, fresh=True)
             warm_outliers = self._gnc_outliers
             c_values, c_weights, _ = self._solve(*cold, candidates)
-            if _better(cold[0], c_values, c_weights, graph, values, weights, n_known):
+            if better(cold[0], c_values, c_weights, graph, values, weights, n_known):
                 graph, values, weights = cold[0], c_values, c_weights
             else:
                 self._gnc_outliers = warm_outliers
@@ -274,6 +266,35 @@ class PoseGraph:
         )
         return result
 
+    def _select(self) -> tuple[list[Match], dict[int, str], bool]:
+        """The matches left for the solve after PCM (per robot pair, cached while its matches
+        and the odometry under them are unchanged) and ``min_matches``, the rejected ones with
+        why, and whether every clique search was exact."""
+        o = self.options
+        rejected: dict[int, str] = {}
+        candidates = list(self._matches)
+        exact = True
+        if o.pcm:
+            kept: list[Match] = []
+            for key, pair in by_robot_pair(candidates).items():
+                ids = tuple(m.id for m in pair)
+                cached = self._pcm_cache.get(key)
+                if cached and cached[:2] == (ids, self._odometry_version):
+                    inliers, pair_exact = cached[2], cached[3]
+                else:
+                    inliers, pair_exact = self._pcm(pair)
+                    self._pcm_cache[key] = (ids, self._odometry_version, inliers, pair_exact)
+                exact &= pair_exact
+                kept += [pair[k] for k in inliers]
+                rejected.update({pair[k].id: "pcm" for k in set(range(len(pair))) - inliers})
+            candidates = sorted(kept, key=lambda m: m.id)
+        if o.min_matches > 1:
+            for (a, b), pair in by_robot_pair(candidates).items():
+                if a != b and len(pair) < o.min_matches:
+                    rejected.update({m.id: "pending" for m in pair})
+            candidates = [m for m in candidates if m.id not in rejected]
+        return candidates, rejected, exact
+
     def _pcm(self, pair: list[Match]) -> tuple[set[int], bool]:
         """Indices (into ``pair``) of the largest pairwise-consistent subset."""
         if len(pair) < 2:
@@ -287,51 +308,9 @@ class PoseGraph:
         return set(clique), exact
 
     def _pairwise_mahalanobis(self, pair: list[Match]) -> np.ndarray:
-        """(m, m) squared Mahalanobis distances of Fₖ·Fₗ⁻¹ from identity (module docstring).
-
-        Everything is expressed as left perturbations in robot a's map frame (a = target robot
-        of the first match; matches the other way round are inverted first).
-        """
-        a, b = pair[0].target[0], pair[0].source[0]
-        Z, Cz, ia, jb = [], [], [], []
-        for m in pair:
-            if m.target[0] == a and m.source[0] == b:
-                T, C, (_, i), (_, j) = m.transform, m.covariance, m.target, m.source
-            else:  # the same robot pair the other way round: invert the measurement
-                (T, C), (_, i), (_, j) = (
-                    _invert_with_cov(m.transform, m.covariance),
-                    m.source,
-                    m.target,
-                )
-            Z.append(T)
-            Cz.append(C)
-            ia.append(i)
-            jb.append(j)
-        A = np.array([self._anchors[(a, i)] for i in ia])
-        B = np.array([self._anchors[(b, j)] for j in jb])
-        Z, Cz = np.array(Z), np.array(Cz)
-        F = A @ Z @ invert(B)
-        AdA = adjoint(A)
-        Q = AdA @ Cz @ AdA.transpose(0, 2, 1)  # match noise of Fₖ in a's map frame
-        # Positions along each robot's sorted seqs: S is indexed by them.
-        ia_ = np.searchsorted(self._seqs[a], ia)
-        jb_ = np.searchsorted(self._seqs[b], jb)
-        Sa, Sb = self._drift_prefix(a)[ia_], self._drift_prefix(b)[jb_]
-        AdF = adjoint(F)
-        Finv = invert(F)
-        d2 = np.empty((len(pair), len(pair)))
-        for k0 in range(0, len(pair), 64):  # row blocks: memory O(64·m), not O(m²)
-            k = slice(k0, k0 + 64)
-            sa = np.sign(ia_[None, :] - ia_[k, None])[..., None, None]
-            sb = np.sign(jb_[None, :] - jb_[k, None])[..., None, None]
-            dSa = sa * (Sa[None] - Sa[k, None])
-            dSb = sb * (Sb[None] - Sb[k, None])
-            Ad = AdF[k, None]
-            cov = Q[k, None] + Q[None] + dSa + Ad @ dSb @ np.swapaxes(Ad, -1, -2)
-            r = se3_log(F[k, None] @ Finv[None])
-            sol = np.linalg.solve(cov + 1e-12 * np.eye(6), r[..., None])[..., 0]
-            d2[k] = np.einsum("kli,kli->kl", r, sol)
-        return 0.5 * (d2 + d2.T)
+        """(m, m) squared Mahalanobis distances of Fₖ·Fₗ⁻¹ from identity (module docstring;
+        `gmmap.mapping.consistency.pairwise_mahalanobis`)."""
+        return pairwise_mahalanobis(pair, self._anchors, self._seqs, self._drift_prefix)
 
     def _drift_prefix(self, robot: str) -> np.ndarray:
         """(n, 6, 6) Sᵢ = Σ_{s≤i} Ad(anchor_s) Σ_s Ad(anchor_s)ᵀ over the robot's submaps: the
@@ -340,12 +319,7 @@ class PoseGraph:
         if robot in self._prefix:
             return self._prefix[robot]
         anchors = np.array([self._anchors[(robot, s)] for s in self._seqs[robot]])
-        S = np.zeros((len(anchors), 6, 6))
-        if len(anchors) > 1:
-            steps = invert(anchors[:-1]) @ anchors[1:]
-            sig = self._odometry_sigmas(steps)
-            Ad = adjoint(anchors[1:])
-            S[1:] = np.cumsum(Ad @ (sig[:, :, None] ** 2 * Ad.transpose(0, 2, 1)), axis=0)
+        S = drift_prefix(anchors, self._odometry_sigmas)
         self._prefix[robot] = S
         return S
 
@@ -453,22 +427,7 @@ class PoseGraph:
                 known = a != b and a in self._frame and b in self._frame
                 if known and self._reference[a] == self._reference[b]:
                     links[a].append((0, b, invert(self._frame[a]) @ self._frame[b]))
-        frames: dict[str, np.ndarray] = {}
-        for robot in robots:
-            if reference[robot] != robot:
-                continue
-            heap: list[tuple[int, int, str, np.ndarray]] = [(0, 0, robot, np.eye(4))]
-            tie = 1
-            while heap:
-                dist, _, r, T = heapq.heappop(heap)
-                if r in frames:
-                    continue
-                frames[r] = T
-                for cost, nxt, T_rn in links[r]:
-                    if nxt not in frames and reference[nxt] == robot:
-                        heapq.heappush(heap, (dist + cost, tie, nxt, T @ T_rn))
-                        tie += 1
-        return frames, local
+        return shortest_path_frames(robots, links, reference), local
 
     def _solve(
         self,
@@ -478,49 +437,19 @@ class PoseGraph:
         matches: list[Match],
     ) -> tuple[gtsam.Values, np.ndarray, str]:
         """Solves; returns the values, each match's weight (1 inlier, 0 outlier) and how:
-        "lm" (no robust stage), "verified" or "gnc".
-
-        GNC runs its whole schedule (several Levenberg-Marquardt solves) whenever any match is
-        an outlier, i.e. at nearly every update once a wrong match PCM cannot see (a single
-        match between two robots) is in the graph. So first one solve with last time's inlier
-        set: when the truncated-least-squares weights it implies are the same set (every
-        included match under the threshold, every excluded one over it), that is a fixed point
-        of GNC and it is kept; otherwise GNC decides from scratch.
-        """
-        o = self.options
-        lm = gtsam.LevenbergMarquardtParams()
-        lm.setMaxIterations(o.max_iterations)
-        if not (o.gnc and matches):
-            values = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm).optimize()
-            return values, np.ones(len(matches)), "lm"
-        factors = [graph.at(n_known + k) for k in range(len(matches))]
-        threshold = 0.5 * chi2_quantile(o.gnc_probability, 6)  # GTSAM's factor error is ½‖r‖²
-        inlier = np.array([m.id not in self._gnc_outliers for m in matches])
-        trial = gtsam.NonlinearFactorGraph()
-        for k in range(n_known):
-            trial.add(graph.at(k))
-        for f, keep in zip(factors, inlier, strict=True):
-            if keep:
-                trial.add(f)
-        values = gtsam.LevenbergMarquardtOptimizer(trial, initial, lm).optimize()
-        if np.array_equal(np.array([f.error(values) < threshold for f in factors]), inlier):
-            return values, inlier.astype(float), "verified"
-        params = gtsam.GncLMParams(lm)
-        params.setLossType(gtsam.GncLossType.TLS)
-        params.setKnownInliers(list(range(n_known)))
-        gnc = gtsam.GncLMOptimizer(graph, initial, params)
-        gnc.setInlierCostThresholdsAtProbability(o.gnc_probability)
-        values = gnc.optimize()
-        weights = np.asarray(gnc.getWeights())[n_known:]
-        self._gnc_outliers = {m.id for m, w in zip(matches, weights, strict=True) if w <= 0.5}
-        return values, weights, "gnc"
+        "lm" (no robust stage), "verified" or "gnc" (`gmmap.mapping.solver.solve`, which says
+        when GNC runs). Keeps the match ids GNC rejected for the next update."""
+        values, weights, solver, self._gnc_outliers = solve(
+            graph, initial, n_known, matches, self.options, self._gnc_outliers
+        )
+        return values, weights, solver
 
     def _finish(
         self, values: gtsam.Values, accepted: list[Match], rejected: dict[int, str]
     ) -> BackendResult:
         """Final groups from the accepted matches, poses re-anchored to each group's reference
         (exact where GNC split a group), frames and the warm-start state."""
-        groups = _components(self.robots, accepted)
+        groups = components(self.robots, accepted)
         reference = {r: g[0] for g in groups for r in g}
         nodes = list(self._key)
         mats = project_rigid(np.array([values.atPose3(self._key[n]).matrix() for n in nodes]))
@@ -558,236 +487,3 @@ class PoseGraph:
     def estimate(self) -> dict[Node, np.ndarray]:
         """The last solution's poses in each robot's own map frame (drift-corrected anchors)."""
         return dict(self._local)
-
-
-# ---------------------------------------------------------------------------- helpers
-def _rigid_matrix(T: np.ndarray, what: str) -> np.ndarray:
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise InvalidInputError(f"{what} must be a finite 4x4 matrix, got shape {T.shape}")
-    R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
-        raise InvalidInputError(f"{what} is not a rigid transform")
-    return project_rigid(T)
-
-
-def project_rigid(T: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) with the rotation blocks replaced by their nearest rotations (SVD)."""
-    U, _, Vt = np.linalg.svd(T[..., :3, :3])
-    out = np.array(T, dtype=np.float64)
-    out[..., :3, :3] = U @ Vt
-    out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
-    return out
-
-
-def adjoint(T: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) → (..., 6, 6) adjoints for (ω, v) tangents: [[R, 0], [[t]×R, R]], so that
-    exp(ξ)·T = T·exp(Ad(T)⁻¹ ξ) (GTSAM's Pose3.AdjointMap)."""
-    R, t = T[..., :3, :3], T[..., :3, 3]
-    out = np.zeros((*T.shape[:-2], 6, 6))
-    out[..., :3, :3] = R
-    out[..., 3:, 3:] = R
-    out[..., 3:, :3] = _hat(t) @ R
-    return out
-
-
-def _hat(v: np.ndarray) -> np.ndarray:
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    return out - np.swapaxes(out, -1, -2)
-
-
-def right_information(transform: np.ndarray, information_left: np.ndarray) -> np.ndarray:
-    """Information of a left perturbation exp(ξ)·T as one of a right perturbation T·exp(ξ')
-    (GTSAM's): ξ = Ad_T ξ', so Info_R = Ad_Tᵀ Info_L Ad_T."""
-    Ad = adjoint(np.asarray(transform, dtype=np.float64))
-    return Ad.T @ np.asarray(information_left, dtype=np.float64) @ Ad
-
-
-def _invert_with_cov(T: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """T⁻¹ and its left-perturbation covariance: (exp(ξ)T)⁻¹ = exp(−Ad_{T⁻¹} ξ)·T⁻¹."""
-    Ti = invert(T)
-    Ad = adjoint(Ti)
-    return Ti, Ad @ C @ Ad.T
-
-
-def se3_log(T: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) → (..., 6) SE(3) logarithm (ω, v), finite for any rotation (wrong matches).
-
-    The translation part matters: with (log R, t) instead, loops far from the map origin pick
-    up second-order rotation·lever-arm terms and true matches fail the χ² test several times
-    more often than the nominal rate."""
-    R = T[..., :3, :3]
-    theta = rotation_angle(R.reshape(-1, 3, 3)).reshape(R.shape[:-2])
-    vee = np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
-    s = np.sin(theta)
-    ok = s > 1e-6
-    w = np.where(ok, theta / np.where(ok, 2 * s, 1.0), 0.5)[..., None] * vee
-    # Near π the skew part vanishes; the axis is then the dominant column of (R + I)/2.
-    near_pi = theta > math.pi - 1e-3
-    if np.any(near_pi):
-        B = 0.5 * (R[near_pi] + np.eye(3))
-        k = np.argmax(np.diagonal(B, axis1=1, axis2=2), axis=1)
-        col = B[np.arange(len(B)), :, k]
-        w[near_pi] = col / np.linalg.norm(col, axis=1, keepdims=True) * theta[near_pi][:, None]
-    # v = J⁻¹(ω) t with J⁻¹ = I − W/2 + (1/θ² − (1 + cos θ)/(2θ sin θ)) W²: → 1/12 at 0,
-    # → 1/π² at π (the second term vanishes there).
-    W = _hat(w)
-    small = theta < 1e-6
-    th = np.where(small, 1.0, theta)
-    second = np.where(ok, (1 + np.cos(th)) / (2 * th * np.where(ok, s, 1.0)), 0.0)
-    c = np.where(small, 1 / 12, 1 / th**2 - second)
-    J_inv = np.eye(3) - 0.5 * W + c[..., None, None] * (W @ W)
-    return np.concatenate([w, np.einsum("...ij,...j->...i", J_inv, T[..., :3, 3])], axis=-1)
-
-
-def chi2_quantile(p: float, dof: int = 6) -> float:
-    """Quantile of the χ² distribution with an even number of degrees of freedom, by bisection
-    on its closed-form CDF 1 − e^(−x/2) Σ_{j<dof/2} (x/2)ʲ/j!  (scipy is not a dependency)."""
-    if dof <= 0 or dof % 2:
-        raise InvalidInputError(f"dof must be even and positive, got {dof}")
-
-    def cdf(x: float) -> float:
-        h = x / 2
-        return 1 - math.exp(-h) * sum(h**j / math.factorial(j) for j in range(dof // 2))
-
-    lo, hi = 0.0, 1.0
-    while cdf(hi) < p:
-        hi *= 2
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if cdf(mid) < p else (lo, mid)
-    return 0.5 * (lo + hi)
-
-
-def max_clique(
-    adjacent: np.ndarray, budget: int = 20_000, order: list[int] | None = None
-) -> tuple[list[int], bool]:
-    """A maximum clique of an undirected graph (boolean adjacency, no self loops).
-
-    Heuristics first (peeling the least connected vertex until a clique remains, which suits
-    PCM's graphs, a near-clique of true matches plus sparse wrong ones; and greedy growth from
-    the best-connected vertices), then branch and bound with greedy-colouring bounds (Tomita's
-    MCQ, on integer bitsets) looks for a larger one. Returns the clique (sorted) and whether
-    the search finished within ``budget`` branch nodes (exact). ``order`` lists vertices by
-    preference: among cliques of one size the more preferred tend to win.
-    """
-    n = len(adjacent)
-    if n == 0:
-        return [], True
-    order = list(order) if order is not None else list(range(n))
-    A = np.asarray(adjacent, dtype=bool)[np.ix_(order, order)]  # vertex v here is order[v]
-    best = _heuristic_clique(A)
-    nbr = [int.from_bytes(np.packbits(row, bitorder="little").tobytes(), "little") for row in A]
-    state = {"best": best, "nodes": 0}
-
-    def colour_sort(P: int) -> list[tuple[int, int]]:
-        # P's vertices with colour bounds, colours increasing (a clique has ≤ 1 per colour);
-        # within a colour, lower (more preferred) vertices first.
-        out, colour = [], 0
-        while P:
-            colour += 1
-            avail = P
-            while avail:
-                v = (avail & -avail).bit_length() - 1
-                out.append((v, colour))
-                P &= ~(1 << v)
-                avail &= ~nbr[v] & ~(1 << v)
-        return out
-
-    def expand(R: list[int], P: int) -> bool:
-        for v, colour in reversed(colour_sort(P)):
-            if len(R) + colour <= len(state["best"]):
-                return True
-            state["nodes"] += 1
-            if state["nodes"] > budget:
-                return False
-            newP = P & nbr[v]
-            if newP:
-                if not expand([*R, v], newP):
-                    return False
-            elif len(R) + 1 > len(state["best"]):
-                state["best"] = [*R, v]
-            P &= ~(1 << v)
-        return True
-
-    exact = expand([], (1 << n) - 1)
-    return sorted(order[v] for v in state["best"]), exact
-
-
-def _heuristic_clique(A: np.ndarray, seeds: int = 8) -> list[int]:
-    """The larger of: peeling (drop a vertex of least degree, the least preferred on ties,
-    until the rest is a clique) and greedy growth from the ``seeds`` best-connected vertices
-    (add the candidate with most candidate neighbours: PCM's heuristic)."""
-    n = len(A)
-    alive = np.ones(n, dtype=bool)
-    degree = A.sum(axis=1).astype(np.int64)
-    while True:
-        idx = np.flatnonzero(alive)
-        d = degree[idx]
-        if d.min() >= len(idx) - 1:
-            best = list(idx)
-            break
-        v = idx[len(d) - 1 - np.argmin(d[::-1])]
-        alive[v] = False
-        degree -= A[:, v]
-    for seed in np.argsort(-A.sum(axis=1), kind="stable")[:seeds]:
-        clique, cand = [int(seed)], A[seed].copy()
-        while cand.any():
-            idx = np.flatnonzero(cand)
-            v = int(idx[np.argmax(A[np.ix_(idx, idx)].sum(axis=1))])
-            clique.append(v)
-            cand &= A[v]
-        if len(clique) > len(best):
-            best = clique
-    return [int(v) for v in best]
-
-
-def _by_robot_pair(matches: list[Match]) -> dict[tuple[str, str], list[Match]]:
-    pairs: dict[tuple[str, str], list[Match]] = {}
-    for m in matches:
-        key = tuple(sorted((m.target[0], m.source[0])))
-        pairs.setdefault(key, []).append(m)
-    return pairs
-
-
-def _components(robots: list[str], matches: list[Match]) -> list[list[str]]:
-    """Connected components of robots linked by matches, each sorted, sorted by first name."""
-    parent = {r: r for r in robots}
-
-    def find(r: str) -> str:
-        while parent[r] != r:
-            parent[r] = parent[parent[r]]
-            r = parent[r]
-        return r
-
-    for m in matches:
-        a, b = find(m.target[0]), find(m.source[0])
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    groups: dict[str, list[str]] = {}
-    for r in robots:
-        groups.setdefault(find(r), []).append(r)
-    return sorted(sorted(g) for g in groups.values())
-
-
-def _better(
-    graph_a: gtsam.NonlinearFactorGraph,
-    values_a: gtsam.Values,
-    weights_a: np.ndarray,
-    graph_b: gtsam.NonlinearFactorGraph,
-    values_b: gtsam.Values,
-    weights_b: np.ndarray,
-    n_known: int,
-) -> bool:
-    """Whether solution a beats b: more matches kept as inliers, then a lower cost of the
-    odometry, priors and kept matches."""
-
-    def score(graph, values, weights) -> tuple[int, float]:
-        kept = [*range(n_known), *(n_known + i for i, w in enumerate(weights) if w > 0.5)]
-        return -len(kept), sum(graph.at(k).error(values) for k in kept)
-
-    return score(graph_a, values_a, weights_a) < score(graph_b, values_b, weights_b)

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.mapping.backend import BackendResult, project_rigid
-from gmmap.math.geometry import invert
+from gmmap.mapping.backend import BackendResult
+from gmmap.math.geometry import invert, project_rigid
 
 
 @dataclass(frozen=True)
