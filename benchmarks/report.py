@@ -2,21 +2,22 @@
 
 Each script benchmarks/<name>.py prints one JSON object, which ``make bench`` saves as
 bench-<name>.json in the repository root. This script reads every such file that exists and
-writes one section per benchmark. A section has a sentence on what the benchmark measures and
-against which baseline, the command that produced it, and its figures. The figures are the JSON
-walked generically:
+writes one section per benchmark: a sentence on what it measures and against which baseline,
+then its figures. The figures are the JSON walked generically:
 
-- scalars and short lists of scalars become a two-column table;
-- nested objects become sub-headings;
-- lists of objects become one table with a row per object (nested keys dotted), or one
-  sub-heading per object when they are too wide for a table.
+- an object's scalars (and lists of scalars) form a two-column table, figure and value;
+- sibling objects whose figures are flat and mostly shared form one table, a row each;
+- a list of flat objects forms one table, a row per object (nested keys dotted), or a column
+  per object when the figures are too many to fit across;
+- anything else goes under its own sub-heading, walked the same way.
 
-Floats are rounded to 4 significant digits. Integers, which are counts, stay exact. Benchmarks
-with no JSON file are listed as not run, together with how to run them.
+Floats are rounded to 4 significant digits. Integers, which are counts, stay exact. Lists of
+more than 25 values are shortened (the JSON files have them all). Benchmarks without a
+readable JSON file are listed as not run, each with the command that runs it.
 
-    python benchmarks/report.py [--root DIR] [--out FILE]
+    python benchmarks/report.py [--root DIR] [--out FILE|-]
 
-Python 3.10+, standard library only (it imports nothing of gmmap, so it runs anywhere).
+Python 3.10+, standard library only. It imports nothing of gmmap, so it runs anywhere.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import ast
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -82,12 +84,12 @@ DESCRIPTIONS: dict[str, str] = {
 }
 ORDER = tuple(DESCRIPTIONS)
 MAX_LIST = 25  # longer lists of scalars are shortened in the page (the JSON has them all)
-MAX_COLUMNS = 12  # wider lists of objects get a sub-heading per object instead of one table
+MAX_COLUMNS = 12  # a table gets at most this many value columns
 MAX_LEVEL = 6  # deepest Markdown heading; deeper objects get a bold title
 
 
 def fmt(value: Any) -> str:
-    """A JSON scalar (or a list of them) as page text; floats to 4 significant digits."""
+    """A JSON leaf as page text; floats to 4 significant digits, integers exact."""
     if value is None:
         return "–"
     if isinstance(value, bool):
@@ -113,15 +115,24 @@ def cell(value: Any) -> str:
     return fmt(value).replace("|", "\\|").replace("\n", " ")
 
 
+def code(text: str) -> str:
+    """``text`` as inline code, fenced by more backticks than it contains in a row."""
+    fence = "`"
+    while fence in text:
+        fence += "`"
+    pad = " " if text.startswith("`") or text.endswith("`") else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
 def is_leaf(value: Any) -> bool:
-    """A scalar, or a list holding only scalars: shown in one table cell."""
+    """A scalar, or a list (of lists) of scalars: shown in one table cell."""
     if isinstance(value, list):
-        return all(not isinstance(v, dict | list) for v in value)
+        return all(is_leaf(v) for v in value)
     return not isinstance(value, dict)
 
 
 def flatten(obj: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested objects as one level of dotted keys; non-scalar lists are kept whole."""
+    """Nested objects as one level of dotted keys."""
     out: dict[str, Any] = {}
     for key, value in obj.items():
         name = f"{prefix}{key}"
@@ -132,7 +143,16 @@ def flatten(obj: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def record(value: Any) -> dict[str, Any] | None:
+    """A non-empty object whose flattened values are all leaves (one table row), else None."""
+    if not isinstance(value, dict) or not value:
+        return None
+    flat = flatten(value)
+    return flat if all(is_leaf(v) for v in flat.values()) else None
+
+
 def heading(title: str, level: int) -> list[str]:
+    """A Markdown heading at ``level``, or a bold title below the deepest one."""
     if level > MAX_LEVEL:
         return [f"**{title}**", ""]
     return [f"{'#' * level} {title}", ""]
@@ -145,20 +165,60 @@ def key_table(items: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
-def record_table(rows: list[dict[str, Any]]) -> list[str] | None:
-    """One row per object, the union of their dotted keys as columns (None if too wide or
-    if a value would not fit in a cell)."""
-    flat = [flatten(r) for r in rows]
-    columns: list[str] = []
-    for row in flat:
-        columns += [k for k in row if k not in columns]
-    if len(columns) > MAX_COLUMNS or not all(is_leaf(v) for r in flat for v in r.values()):
-        return None
-    lines = ["| # | " + " | ".join(cell(c) for c in columns) + " |"]
-    lines.append("|---" * (len(columns) + 1) + "|")
-    for i, row in enumerate(flat):
-        lines.append(f"| {i} | " + " | ".join(cell(row.get(c)) for c in columns) + " |")
+def grid(
+    corner: str | None, rows: list[str], columns: list[str], value: Callable[[int, int], Any]
+) -> list[str]:
+    """A table with ``value(row_index, column_index)`` in its cells, and the row names in a
+    first column headed ``corner`` (no such column when ``corner`` is None)."""
+    head = [] if corner is None else [corner]
+    lines = ["| " + " | ".join(cell(c) for c in [*head, *columns]) + " |"]
+    lines.append("|---" * (len(head) + len(columns)) + "|")
+    for i, row in enumerate(rows):
+        cells = [cell(value(i, j)) for j in range(len(columns))]
+        lines.append("| " + " | ".join([cell(row)] * len(head) + cells) + " |")
     return [*lines, ""]
+
+
+def record_table(
+    records: list[dict[str, Any]], labels: list[str], label_column: bool = True
+) -> list[str] | None:
+    """Flat records as one table: a row per record (led by its label if ``label_column``),
+    or a column per record when there are more figures than fit across; None when neither
+    fits."""
+    columns: list[str] = []
+    for r in records:
+        columns += [k for k in r if k not in columns]
+    if len(columns) <= MAX_COLUMNS:
+        corner = "" if label_column else None
+        return grid(corner, labels, columns, lambda i, j: records[i].get(columns[j]))
+    if len(records) <= MAX_COLUMNS:
+        return grid("figure", columns, labels, lambda i, j: records[j].get(columns[i]))
+    return None
+
+
+def labels(items: list[Any]) -> list[str]:
+    """Names for list items: their common first key's value when that tells them apart
+    (e.g. "robots 4"), else their index."""
+    index = [f"[{i}]" for i in range(len(items))]
+    if not items or not all(isinstance(v, dict) and v for v in items):
+        return index
+    key = next(iter(items[0]))
+    if any(next(iter(v)) != key or not is_scalar(v[key]) for v in items):
+        return index
+    names_ = [f"{key} {fmt(v[key])}" for v in items]
+    return names_ if len(set(names_)) == len(names_) else index
+
+
+def is_scalar(value: Any) -> bool:
+    """Neither an object nor a list."""
+    return not isinstance(value, dict | list)
+
+
+def similar(records: list[dict[str, Any]]) -> bool:
+    """Whether records share most of their figures (worth one table together)."""
+    union = set().union(*records)
+    common = set(records[0]).intersection(*records[1:])
+    return bool(common) and 2 * len(common) >= len(union)
 
 
 def render(value: Any, level: int) -> list[str]:
@@ -171,26 +231,35 @@ def render(value: Any, level: int) -> list[str]:
 
 
 def render_object(obj: dict[str, Any], level: int) -> list[str]:
-    """Leaf figures first, as one table, then each nested value under its own heading."""
+    """Leaf figures as one table; sibling objects of similar flat figures as one table
+    together; every other value under its own heading."""
     if not obj:
         return ["(empty)", ""]
     leaves = {k: v for k, v in obj.items() if is_leaf(v)}
     lines = key_table(leaves) if leaves else []
+    flat = {k: r for k, v in obj.items() if (r := record(v)) is not None}
+    table = None
+    if len(flat) >= 2 and similar(list(flat.values())):
+        table = record_table(list(flat.values()), list(flat))
+    if table is not None:
+        lines += table
     for key, value in obj.items():
-        if key not in leaves:
+        if key not in leaves and (table is None or key not in flat):
             lines += heading(key, level) + render(value, level + 1)
     return lines
 
 
 def render_list(items: list[Any], level: int) -> list[str]:
     """A list holding objects or lists: one table if it can, else one heading per item."""
-    if all(isinstance(v, dict) for v in items):
-        table = record_table(items)
+    names_ = labels(items)
+    records = [record(v) for v in items]
+    if all(r is not None for r in records):
+        table = record_table([r for r in records if r is not None], names_, label_column=False)
         if table is not None:
             return table
     lines: list[str] = []
-    for i, value in enumerate(items):
-        lines += heading(f"[{i}]", level) + render(value, level + 1)
+    for name, value in zip(names_, items, strict=True):
+        lines += heading(name, level) + render(value, level + 1)
     return lines
 
 
@@ -212,12 +281,17 @@ def description(name: str) -> str:
 
 
 def command(name: str) -> str:
-    """How to run the benchmark on its own: its docstring's usage line, or the plain one."""
-    for line in docstring(name).splitlines():
-        line = line.strip()
-        if line.startswith(".venv/bin/python benchmarks/"):
-            return f"{line} > bench-{name}.json"
+    """How to run the benchmark on its own and save its output where this script reads it."""
     return f".venv/bin/python benchmarks/{name}.py > bench-{name}.json"
+
+
+def options(name: str) -> str:
+    """The options of the benchmark's usage line in its docstring ("" when it has none)."""
+    script = f"benchmarks/{name}.py"
+    for line in docstring(name).splitlines():
+        if script in line:
+            return line.split(script, 1)[1].strip()
+    return ""
 
 
 def names(root: Path) -> list[str]:
@@ -239,34 +313,40 @@ def load(path: Path) -> tuple[dict[str, Any] | None, str | None]:
 
 
 def section(name: str, data: dict[str, Any]) -> list[str]:
+    """One benchmark's section: what it measures, then its figures."""
     lines = [f"## {name}", "", description(name), ""]
-    lines += [f"From `bench-{name}.json`, written by `{command(name)}`.", ""]
+    script = f"benchmarks/{name}.py"
+    source = f" ({code(script)})" if (ROOT / script).exists() else ""
+    lines += [f"From `bench-{name}.json`{source}.", ""]
     return lines + render_object(data, 3)
 
 
-def not_run(missing: list[tuple[str, str]]) -> list[str]:
+def not_run(missing: list[tuple[str, str]], total: int) -> list[str]:
     """The benchmarks with no (usable) output, each with how to run it alone."""
     lines = ["## Not run", ""]
-    if len(missing) == len(names_cache):
+    if len(missing) == total:
         lines += ["No benchmark has been run yet.", ""]
     lines += [
-        "Run them all with `make bench` (which also regenerates this page), or one with the "
-        "command below, then `python benchmarks/report.py`.",
+        "To run them all, use `make bench`, which saves each benchmark's JSON as "
+        "`bench-<name>.json` in the repository root and regenerates this page. To run one, "
+        "use the command given for it below, then regenerate the page with "
+        "`python benchmarks/report.py`.",
         "",
-        "| benchmark | status | what it measures | run alone |",
-        "|---|---|---|---|",
     ]
     for name, status in missing:
-        lines.append(f"| {name} | {status} | {cell(description(name))} | `{command(name)}` |")
-    return [*lines, ""]
+        lines += [f"### {name}", ""]
+        if status != "not run":
+            lines += [f"Output {status}.", ""]
+        lines += [description(name), ""]
+        lines += [f"Run alone: {code(command(name))}", ""]
+        if options(name):
+            lines += [f"Options: {code(options(name))}", ""]
+    return lines
 
 
-names_cache: list[str] = []
-
-
-def page(root: Path) -> tuple[str, int]:
-    """The whole page, and how many benchmarks it has figures for."""
-    names_cache[:] = names(root)
+def page(root: Path) -> tuple[str, int, int]:
+    """The whole page, how many benchmarks it has figures for, and how many there are."""
+    every = names(root)
     lines = [
         "# Benchmarks",
         "",
@@ -279,7 +359,7 @@ def page(root: Path) -> tuple[str, int]:
     ]
     missing: list[tuple[str, str]] = []
     present = 0
-    for name in names_cache:
+    for name in every:
         path = root / f"bench-{name}.json"
         if not path.exists():
             missing.append((name, "not run"))
@@ -291,8 +371,8 @@ def page(root: Path) -> tuple[str, int]:
         lines += section(name, data)
         present += 1
     if missing:
-        lines += not_run(missing)
-    return "\n".join(lines).rstrip() + "\n", present
+        lines += not_run(missing, len(every))
+    return "\n".join(lines).rstrip() + "\n", present, len(every)
 
 
 def main() -> None:
@@ -302,14 +382,14 @@ def main() -> None:
         "--out", default=str(ROOT / "docs" / "benchmarks.md"), help="the page ('-': stdout)"
     )
     args = parser.parse_args()
-    text, present = page(args.root)
+    text, present, total = page(args.root)
     if args.out == "-":
         sys.stdout.write(text)
         return
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
-    print(f"wrote {out}: {present} of {len(names_cache)} benchmarks", file=sys.stderr)
+    print(f"wrote {out}: {present} of {total} benchmarks", file=sys.stderr)
 
 
 if __name__ == "__main__":

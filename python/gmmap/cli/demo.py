@@ -53,21 +53,7 @@ def run_demo(
     procs = []
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
-        own = replace(
-            config,
-            robot=replace(
-                config.robot,
-                name=name,
-                fleet=fleet,
-                store=str(out / f"{name}.sqlite"),
-                wait_for=tuple(n for n in names if n != name),
-            ),
-            transport=replace(
-                config.transport,
-                port=ports[i],
-                connect=tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i),
-            ),
-        )
+        own = _robot_config(config, i, names, ports, fleet, out)
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--config", str(own.save(out / f"{name}.yaml")), "--sim", "--sim-index", str(i),
@@ -98,6 +84,23 @@ def run_demo(
     report["wall_s"] = time.perf_counter() - start
     (out / "demo.json").write_text(json.dumps(report, indent=1))
     return report
+
+
+def _robot_config(
+    config: Config, i: int, names: list[str], ports: list[int], fleet: str, out: Path
+) -> Config:
+    """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints."""
+    name = names[i]
+    robot = replace(
+        config.robot,
+        name=name,
+        fleet=fleet,
+        store=str(out / f"{name}.sqlite"),
+        wait_for=tuple(n for n in names if n != name),
+    )
+    peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+    transport = replace(config.transport, port=ports[i], connect=peers)
+    return replace(config, robot=robot, transport=transport)
 
 
 def _relay(proc: subprocess.Popen, log) -> None:

@@ -71,8 +71,6 @@ def eval_registration(
     as_json: bool,
 ) -> None:
     """Register consecutive submaps and compare with ground truth (the paper's Table I)."""
-    from dataclasses import replace
-
     from gmmap.eval.registration import METHODS, evaluate_registration
     from gmmap.io import datasets
 
@@ -92,7 +90,6 @@ def eval_registration(
     if drift is not None:
         loader_options["drift"] = datasets.Drift(translation=drift)
     frames = datasets.open(path, **loader_options)
-    options = replace(config.build, covariance="full")
     try:
         ladder = tuple(float(v) for v in scales.split(",")) if scales else None
     except ValueError:
@@ -103,29 +100,29 @@ def eval_registration(
         chosen,
         global_mode,
         max_pairs,
-        options,
+        config.build,
         seed,
         log,
         ladder,
         odometry_guess,
     )
-    if as_json:
-        click.echo(json.dumps(r))
-        return
-    click.echo(
+    click.echo(json.dumps(r) if as_json else _registration_table(r, frames_per_submap, global_mode))
+
+
+def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> str:
+    lines = [
         f"{r['pairs']} pairs of {frames_per_submap}-frame submaps"
-        f"{' (global: no initial guess)' if global_mode else ''}"
-    )
-    click.echo(
+        f"{' (global: no initial guess)' if global_mode else ''}",
         f"{'method':<10} {'t mean (m)':>10} {'t RMSE (m)':>10} {'r mean (°)':>10} "
-        f"{'r RMSE (°)':>10} {'success':>8} {'time/pair':>10}"
-    )
+        f"{'r RMSE (°)':>10} {'success':>8} {'time/pair':>10}",
+    ]
     for name, m in r["methods"].items():
-        click.echo(
+        lines.append(
             f"{name:<10} {m['t_error_mean']:>10.4f} {m['t_rmse']:>10.4f} "
             f"{m['r_error_mean']:>10.3f} {m['r_rmse']:>10.3f} "
             f"{m['success_rate']:>8.1%} {m['time_per_pair_s'] * 1e3:>8.1f} ms"
         )
+    return "\n".join(lines)
 
 
 @command.command("place")

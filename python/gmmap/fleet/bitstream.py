@@ -166,6 +166,13 @@ class _BitReader:
 _WINDOW = np.arange(8)
 
 
+def _rice_k(x: np.ndarray, max_k: int) -> int:
+    """The Rice parameter (at most ``max_k``) that codes ``x`` in the fewest bits."""
+    k = np.arange(max_k + 1)
+    costs = (x[None, :] >> k[:, None]).sum(axis=1) + (k + 1) * len(x)
+    return int(np.argmin(costs))
+
+
 def _rice_write(bw: _BitWriter, streams: np.ndarray, ks: np.ndarray) -> None:
     """Rice codes of the rows of ``streams`` (rows × n), row i with parameter ks[i]: first all
     quotients (unary, row after row), then all remainders, so both halves decode vectorised."""

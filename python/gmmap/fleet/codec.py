@@ -58,6 +58,7 @@ from gmmap.fleet.bitstream import (
     _BitReader,
     _BitWriter,
     _Reader,
+    _rice_k,
     _rice_read,
     _rice_write,
     _tb_read,
@@ -67,14 +68,11 @@ from gmmap.fleet.bitstream import (
 from gmmap.fleet.quantise import (
     _bin,
     _bin_centre,
-    _dot,
     _from_octahedral,
-    _half_circle,
     _morton,
-    _octahedral,
     _pexp,
+    _quantise_rotation,
     _rotation,
-    _tangents,
     _unmorton,
 )
 from gmmap.math.gmm import Gmm
@@ -333,16 +331,6 @@ def _read_anchor(r: _Reader) -> np.ndarray:
     return np.vstack([np.reshape(top, (3, 4)), [0.0, 0.0, 0.0, 1.0]])
 
 
-# --- Rice parameters ------------------------------------------------------------------------
-
-
-def _rice_k(x: np.ndarray) -> int:
-    """The Rice parameter that codes ``x`` in the fewest bits."""
-    k = np.arange(MAX_RICE_K + 1)
-    costs = (x[None, :] >> k[:, None]).sum(axis=1) + (k + 1) * len(x)
-    return int(np.argmin(costs))
-
-
 # --- steps and radices shared by encoder and decoder (IEEE basic operations only) -----------
 
 
@@ -416,7 +404,7 @@ def _encode_gmm(g: Gmm, distortion: float) -> bytes:
     j_mean = _bin(2.0 * np.einsum("kji,kj->ki", R, mu - centre) / span, mean_radix)
 
     streams = np.stack([np.diff(morton, prepend=0), n.astype(np.int64) - 1, *gaps.T])
-    ks = np.array([_rice_k(x) for x in streams], dtype=np.int64)
+    ks = np.array([_rice_k(x, MAX_RICE_K) for x in streams], dtype=np.int64)
     w_ = _Writer()
     w_.uvarint(len(g))
     w_.i8(exponent)
@@ -457,19 +445,6 @@ def _quantise_log_stds(ell: np.ndarray, n: np.ndarray) -> tuple[int, np.ndarray,
         gaps[:, i] = np.maximum(0, np.rint((ell[:, i] - prev) / step))
         prev = prev + gaps[:, i] * step
     return floor_code, gaps, _log_stds(floor_code / LOG_FLOOR_SCALE, gaps, step)
-
-
-def _quantise_rotation(V: np.ndarray, radix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Bins of the normal's octahedral (u, v) and of the largest axis' half-diamond coordinate
-    about the decoded normal, and the decoded rotation."""
-    uv = _octahedral(V[:, :, 0])
-    j = np.empty(radix.shape, dtype=np.int64)
-    j[:, 0], j[:, 1] = _bin(uv[:, 0], radix[:, 0]), _bin(uv[:, 1], radix[:, 1])
-    c = _bin_centre(j[:, :2], radix[:, :2])
-    normal = _from_octahedral(c[:, 0], c[:, 1])
-    t1, t2 = _tangents(normal)
-    j[:, 2] = _bin(_half_circle(_dot(V[:, :, 2], t1), _dot(V[:, :, 2], t2)), radix[:, 2])
-    return j, _rotation(normal, _bin_centre(j[:, 2], radix[:, 2]))
 
 
 def _decode_gmm(r: _Reader) -> Gmm:

@@ -1,9 +1,10 @@
 """Quantisation geometry shared by the wire codec's encoder and decoder (`gmmap.fleet.codec`):
 Morton codes of grid cells, equal bins on [-1, 1], the octahedral map of a hemisphere, the
-half diamond of a sign-free direction in a plane and the rotation rebuilt from them.
+half diamond of a sign-free direction in a plane, and a rotation quantised to and rebuilt
+from them.
 
-IEEE-754 basic operations only (no libm) where a decoder derives a radix or a decoded
-parameter from them, so every decoder gets them bit for bit.
+IEEE-754 basic operations only (no libm): the decoder derives radices from these (the mean's
+from the decoded rotation), so every decoder must get them bit for bit.
 """
 
 from __future__ import annotations
@@ -133,3 +134,16 @@ def _rotation(normal: np.ndarray, t: np.ndarray) -> np.ndarray:
     R = np.empty((len(t), 3, 3))
     R[:, :, 0], R[:, :, 1], R[:, :, 2] = normal, _cross(e3, normal), e3
     return R
+
+
+def _quantise_rotation(V: np.ndarray, radix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bins of the normal's octahedral (u, v) and of the largest axis' half-diamond coordinate
+    about the decoded normal, and the decoded rotation."""
+    uv = _octahedral(V[:, :, 0])
+    j = np.empty(radix.shape, dtype=np.int64)
+    j[:, 0], j[:, 1] = _bin(uv[:, 0], radix[:, 0]), _bin(uv[:, 1], radix[:, 1])
+    c = _bin_centre(j[:, :2], radix[:, :2])
+    normal = _from_octahedral(c[:, 0], c[:, 1])
+    t1, t2 = _tangents(normal)
+    j[:, 2] = _bin(_half_circle(_dot(V[:, :, 2], t1), _dot(V[:, :, 2], t2)), radix[:, 2])
+    return j, _rotation(normal, _bin_centre(j[:, 2], radix[:, 2]))

@@ -133,7 +133,11 @@ class RobotNode:
                 self.wire[s.seq] = _sizes(s, len(rec.payload), None)
         self._pending_reload = self.mapper.hold(held)
         for e in self.store.edges():
-            self.mapper.add_match(_match_of(e))
+            nodes = ((e.target_robot, e.target_seq), (e.source_robot, e.source_seq))
+            if all(n in self.mapper.submaps for n in nodes):
+                self.mapper.add_match(_match_of(e))
+            else:  # one of its submaps did not decode: judged again if it arrives again
+                log.warning("%s: stored edge %s → %s lacks a submap; dropped", self.robot, *nodes)
         self._changed.set()
         return len(held)
 

@@ -36,20 +36,29 @@ arrival order, another answers fetch queries, so a slow provider never delays me
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
-import queue
-import socket
 import threading
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
 
 import zenoh
 
 from gmmap.errors import TransportConfigError, TransportError
+from gmmap.fleet.counters import ByteCount, Counters
+from gmmap.fleet.keys import (
+    PREFIX,
+    alive_key,
+    check_seq,
+    data_key,
+    free_port,
+    parse_data_key,
+    parse_fetch,
+)
+from gmmap.fleet.session import open_session
+from gmmap.fleet.worker import Worker, call_logged
 from gmmap.options import NAME_RE, TransportOptions, check_name
 
 __all__ = [
@@ -70,7 +79,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-PREFIX = "gmmap"
 DEFAULT_KIND = "submap"
 
 MessageCallback = Callable[[str, str, int, bytes], None]
@@ -96,132 +104,6 @@ class TransportConfig:
         check_name("robot", self.robot)
 
 
-def _check_seq(seq: object, what: str = "seq") -> int:
-    # bool is an int subclass; True as a sequence number is a bug, not a 1.
-    if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
-        raise TransportConfigError(f"{what} must be an integer ≥ 0; got {seq!r}")
-    return seq
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that was free a moment ago (the OS picks it; another process may still race)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((host, 0))
-        return int(sock.getsockname()[1])
-
-
-def data_key(fleet: str, robot: str, kind: str, seq: int) -> str:
-    """The key expression of one message: ``gmmap/<fleet>/<robot>/<kind>/<seq>``."""
-    return f"{PREFIX}/{fleet}/{robot}/{kind}/{seq}"
-
-
-def alive_key(fleet: str, robot: str) -> str:
-    """The liveliness token of a robot: ``gmmap/<fleet>/<robot>``."""
-    return f"{PREFIX}/{fleet}/{robot}"
-
-
-def parse_data_key(key: str) -> tuple[str, str, str, int] | None:
-    """``(fleet, robot, kind, seq)`` of a message key expression, or None when malformed."""
-    parts = str(key).split("/")
-    if len(parts) != 5 or parts[0] != PREFIX:
-        return None
-    _, fleet, robot, kind, seq_text = parts
-    if not all(NAME_RE.fullmatch(name) for name in (fleet, robot, kind)):
-        return None
-    # Canonical decimal only: "007" or "+7" would give two keys for one message.
-    if not seq_text.isdigit() or str(int(seq_text)) != seq_text:
-        return None
-    return fleet, robot, kind, int(seq_text)
-
-
-@dataclass
-class ByteCount:
-    """Messages and bytes of one (direction, robot, kind); fetch_* are the fetch-reply part."""
-
-    messages: int = 0
-    payload_bytes: int = 0
-    key_bytes: int = 0
-    fetch_messages: int = 0
-    fetch_payload_bytes: int = 0
-
-    def add(self, payload: int, key: int, fetched: bool) -> None:
-        self.messages += 1
-        self.payload_bytes += payload
-        self.key_bytes += key
-        if fetched:
-            self.fetch_messages += 1
-            self.fetch_payload_bytes += payload
-
-    def merge(self, other: ByteCount) -> None:
-        for name, value in asdict(other).items():
-            setattr(self, name, getattr(self, name) + value)
-
-
-class _Counters:
-    """Thread-safe byte counters; Zenoh callbacks and user threads update them concurrently."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._counts: dict[tuple[str, str, str], ByteCount] = {}
-        self.queries_sent = 0
-        self.queries_served = 0
-        self.ignored = 0
-
-    def add(self, direction: str, robot: str, kind: str, payload: int, key: int, fetched: bool):
-        with self._lock:
-            self._counts.setdefault((direction, robot, kind), ByteCount()).add(
-                payload, key, fetched
-            )
-
-    def bump(self, name: str) -> None:
-        with self._lock:
-            setattr(self, name, getattr(self, name) + 1)
-
-    def snapshot(self) -> dict[str, Any]:
-        with self._lock:
-            out: dict[str, Any] = {"sent": {}, "received": {}}
-            totals = {"sent": ByteCount(), "received": ByteCount()}
-            for (direction, robot, kind), count in sorted(self._counts.items()):
-                out[direction].setdefault(robot, {})[kind] = asdict(count)
-                totals[direction].merge(count)
-            out["totals"] = {d: asdict(c) for d, c in totals.items()}
-            out["queries"] = {"sent": self.queries_sent, "served": self.queries_served}
-            out["ignored"] = self.ignored
-            return out
-
-
-_STOP = object()
-
-
-class _Worker:
-    """A daemon thread running queued calls in order; a failing call is logged, never fatal."""
-
-    def __init__(self, name: str) -> None:
-        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self._thread.start()
-
-    def submit(self, fn: Callable[..., Any], *args: Any) -> None:
-        self._queue.put((fn, args))
-
-    def stop(self, timeout: float = 5.0) -> None:
-        self._queue.put(_STOP)
-        # A callback that closes the transport runs on this very thread: joining would deadlock.
-        if threading.current_thread() is not self._thread:
-            self._thread.join(timeout)
-
-    def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is _STOP:
-                return
-            fn, args = item
-            try:
-                fn(*args)
-            except Exception:
-                log.exception("gmmap transport callback %r failed", fn)
-
-
 class Transport:
     """One robot's Zenoh peer session: publish, subscribe, presence and fetch of opaque bytes.
 
@@ -239,8 +121,8 @@ class Transport:
         self.config = config
         self.fleet = config.fleet
         self.robot = config.robot
-        self.listen_endpoints: tuple[str, ...] = ()
-        self._counters = _Counters()
+        self.listen_endpoints: tuple[str, ...] = ()  # set when the session opens
+        self._counters = Counters()
         self._lock = threading.Lock()
         # Zenoh declarations happen under their own lock, never under _lock, which Zenoh's
         # callback threads take: a declaration that waited on one of them could deadlock.
@@ -256,9 +138,9 @@ class Transport:
         self._queryable: Any = None
         self._probes: dict[str, zenoh.Publisher] = {}
         self._closed = False
-        self._session = self._open_session()
-        self._events = _Worker(f"gmmap-transport-events-{self.robot}")
-        self._queries = _Worker(f"gmmap-transport-queries-{self.robot}")
+        self._session, self.listen_endpoints = open_session(self.robot, config.options)
+        self._events = Worker(f"gmmap-transport-events-{self.robot}")
+        self._queries = Worker(f"gmmap-transport-queries-{self.robot}")
         try:
             liveliness = self._session.liveliness()
             self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
@@ -270,43 +152,6 @@ class Transport:
             raise TransportError(f"cannot declare liveliness for {self.robot!r}: {err}") from err
 
     # ---- session ----------------------------------------------------------------------------
-
-    def _zenoh_config(self) -> zenoh.Config:
-        cfg = zenoh.Config()
-        entries: dict[str, Any] = {
-            "mode": self.config.options.mode,
-            "listen/endpoints": list(self.listen_endpoints),
-            "connect/endpoints": list(self.config.options.connect),
-            "scouting/multicast/enabled": self.config.options.multicast_scouting,
-        }
-        entries.update(self.config.options.zenoh_options)
-        for key, value in entries.items():
-            try:
-                cfg.insert_json5(key, json.dumps(value))
-            except (zenoh.ZError, TypeError, ValueError) as err:
-                raise TransportConfigError(f"bad Zenoh option {key}={value!r}: {err}") from err
-        return cfg
-
-    def _open_session(self) -> zenoh.Session:
-        # A port we pick ourselves may be taken between free_port() and Zenoh's bind: retry.
-        attempts = 3 if self.config.options.listen is None and self.config.options.port == 0 else 1
-        for attempt in range(attempts):
-            self.listen_endpoints = (
-                self.config.options.listen
-                if self.config.options.listen is not None  # () listens nowhere (connects only)
-                else (f"tcp/127.0.0.1:{self.config.options.port or free_port()}",)
-            )
-            try:
-                return zenoh.open(self._zenoh_config())
-            except zenoh.ZError as err:
-                if attempt + 1 == attempts:
-                    raise TransportError(
-                        f"cannot open the Zenoh session of robot {self.robot!r} (listen "
-                        f"{list(self.listen_endpoints)}, connect "
-                        f"{list(self.config.options.connect)}): "
-                        f"{err}"
-                    ) from err
-        raise AssertionError("unreachable")
 
     def __enter__(self) -> Transport:
         return self
@@ -351,7 +196,7 @@ class Transport:
         """
         self._check_open()
         check_name("kind", kind)
-        _check_seq(seq)
+        check_seq(seq)
         data = _as_bytes(payload)
         key = data_key(self.fleet, self.robot, kind, seq)
         try:
@@ -419,7 +264,7 @@ class Transport:
         with self._lock:
             callbacks = list(self._message_callbacks)
         for callback in callbacks:
-            _call_logged(callback, robot, kind, seq, payload)
+            call_logged(callback, robot, kind, seq, payload)
 
     # ---- presence ---------------------------------------------------------------------------
 
@@ -431,7 +276,7 @@ class Transport:
             self._join_callbacks.append(callback)
             present = sorted(self._present)
         for robot in present:
-            self._events.submit(_call_logged, callback, robot)
+            self._events.submit(call_logged, callback, robot)
 
     def on_leave(self, callback: PeerCallback) -> None:
         """Call ``callback(robot)`` when another robot of the fleet disappears (it closed its
@@ -472,7 +317,7 @@ class Transport:
             self._present_changed.notify_all()
             callbacks = list(self._join_callbacks if joined else self._leave_callbacks)
         for callback in callbacks:
-            self._events.submit(_call_logged, callback, robot)
+            self._events.submit(call_logged, callback, robot)
 
     # ---- fetch ------------------------------------------------------------------------------
 
@@ -504,7 +349,7 @@ class Transport:
 
     def _answer(self, query: zenoh.Query) -> None:
         try:
-            request = _parse_fetch(str(query.key_expr), query.parameters.get("since"))
+            request = parse_fetch(str(query.key_expr), query.parameters.get("since"))
             if request is None or request[0] != self.fleet:
                 self._counters.bump("ignored")
                 return
@@ -534,8 +379,10 @@ class Transport:
                 self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
         finally:
             # Finalises the query: the requester's get() ends without waiting for its timeout.
-            with contextlib.suppress(Exception):
+            try:
                 query.drop()
+            except Exception:  # already finalised by Zenoh (the session closing): harmless
+                log.debug("dropping a fetch query failed", exc_info=True)
 
     def fetch(
         self,
@@ -553,7 +400,7 @@ class Transport:
         self._check_open()
         check_name("robot", robot)
         check_name("kind", kind)
-        _check_seq(since_seq, "since_seq")
+        check_seq(since_seq, "since_seq")
         found = self._query(
             f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}",
             timeout,
@@ -635,32 +482,9 @@ class Transport:
         return {"fleet": self.fleet, "robot": self.robot, **self._counters.snapshot()}
 
 
-def _parse_fetch(key: str, since: str | None) -> tuple[str, str, str, int] | None:
-    """``(fleet, robot, kind, since)`` of a fetch query ``gmmap/<fleet>/<robot>/<kind>/*``;
-    robot ``*`` for `fetch_unknown`."""
-    parts = key.split("/")
-    if len(parts) != 5 or parts[0] != PREFIX or parts[4] != "*":
-        return None
-    _, fleet, robot, kind, _ = parts
-    names = (fleet, kind) if robot == "*" else (fleet, robot, kind)
-    if not all(NAME_RE.fullmatch(name) for name in names):
-        return None
-    since_text = "0" if since is None else since
-    if not since_text.isdigit():
-        return None
-    return fleet, robot, kind, int(since_text)
-
-
 def _as_bytes(payload: object) -> bytes:
     if isinstance(payload, bytes):
         return payload
     if isinstance(payload, (bytearray, memoryview)):
         return bytes(payload)
     raise TransportConfigError(f"payload must be bytes; got {type(payload).__name__}")
-
-
-def _call_logged(callback: Callable[..., Any], *args: Any) -> None:
-    try:
-        callback(*args)
-    except Exception:
-        log.exception("gmmap transport: callback %r failed", callback)

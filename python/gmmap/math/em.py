@@ -49,20 +49,7 @@ def fit_gmm(
         The fitted Gmm; ``gmm.fit_info`` tells iterations, convergence, log-likelihood, time.
     """
     pts = as_points(points)
-    _check_int("n_components", n_components, 1)
-    _check_int("max_iter", max_iter, 0)
-    _check_int("seed", seed, 0)
-    if covariance not in COVARIANCES:
-        raise InvalidInputError(f"covariance must be one of {COVARIANCES}, got {covariance!r}")
-    if not isinstance(init, Gmm) and init not in INITS:
-        raise InvalidInputError(f"init must be one of {INITS} or a Gmm, got {init!r}")
-    if not (math.isfinite(tol) and tol >= 0):
-        raise InvalidInputError(f"tol must be finite and >= 0, got {tol}")
-    if not (math.isfinite(reg_covar) and reg_covar > 0):
-        raise InvalidInputError(f"reg_covar must be finite and > 0, got {reg_covar}")
-    if not truncation > 0:
-        raise InvalidInputError(f"truncation must be > 0, got {truncation}")
-
+    _check_arguments(n_components, covariance, max_iter, tol, seed, init, reg_covar, truncation)
     start = time.perf_counter()
     full, numbers = covariance == "full", (float(reg_covar), float(truncation))
     if isinstance(init, Gmm):
@@ -82,6 +69,31 @@ def fit_gmm(
         )
     info = FitInfo(int(n_iter), bool(converged), float(ll), time.perf_counter() - start)
     return Gmm(weights, means, covs, fit_info=info)
+
+
+def _check_arguments(
+    n_components: int,
+    covariance: str,
+    max_iter: int,
+    tol: float,
+    seed: int,
+    init: str | Gmm,
+    reg_covar: float,
+    truncation: float,
+) -> None:
+    _check_int("n_components", n_components, 1)
+    _check_int("max_iter", max_iter, 0)
+    _check_int("seed", seed, 0)
+    if covariance not in COVARIANCES:
+        raise InvalidInputError(f"covariance must be one of {COVARIANCES}, got {covariance!r}")
+    if not isinstance(init, Gmm) and init not in INITS:
+        raise InvalidInputError(f"init must be one of {INITS} or a Gmm, got {init!r}")
+    if not (math.isfinite(tol) and tol >= 0):
+        raise InvalidInputError(f"tol must be finite and >= 0, got {tol}")
+    if not (math.isfinite(reg_covar) and reg_covar > 0):
+        raise InvalidInputError(f"reg_covar must be finite and > 0, got {reg_covar}")
+    if not truncation > 0:
+        raise InvalidInputError(f"truncation must be > 0, got {truncation}")
 
 
 def _check_int(name: str, value: object, minimum: int) -> None:

@@ -1,0 +1,56 @@
+"""Opening the fleet transport's Zenoh session (`gmmap.fleet.transport`): the Zenoh configuration
+from `TransportOptions`, and the endpoint to listen on.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import zenoh
+
+from gmmap.errors import TransportConfigError, TransportError
+from gmmap.fleet.keys import free_port
+from gmmap.options import TransportOptions
+
+
+def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -> zenoh.Config:
+    """The Zenoh configuration of a robot's session; `TransportConfigError` for a bad option."""
+    cfg = zenoh.Config()
+    entries: dict[str, Any] = {
+        "mode": options.mode,
+        "listen/endpoints": list(listen_endpoints),
+        "connect/endpoints": list(options.connect),
+        "scouting/multicast/enabled": options.multicast_scouting,
+    }
+    entries.update(options.zenoh_options)
+    for key, value in entries.items():
+        try:
+            cfg.insert_json5(key, json.dumps(value))
+        except (zenoh.ZError, TypeError, ValueError) as err:
+            raise TransportConfigError(f"bad Zenoh option {key}={value!r}: {err}") from err
+    return cfg
+
+
+def open_session(robot: str, options: TransportOptions) -> tuple[zenoh.Session, tuple[str, ...]]:
+    """The open session of ``robot`` and the endpoints it listens on; `TransportError` when
+    Zenoh cannot open it."""
+    # A port we pick ourselves may be taken between free_port() and Zenoh's bind: retry.
+    attempts = 3 if options.listen is None and options.port == 0 else 1
+    for attempt in range(attempts):
+        listen_endpoints = (
+            options.listen
+            if options.listen is not None  # () listens nowhere (connects only)
+            else (f"tcp/127.0.0.1:{options.port or free_port()}",)
+        )
+        try:
+            return zenoh.open(zenoh_config(options, listen_endpoints)), listen_endpoints
+        except zenoh.ZError as err:
+            if attempt + 1 == attempts:
+                raise TransportError(
+                    f"cannot open the Zenoh session of robot {robot!r} (listen "
+                    f"{list(listen_endpoints)}, connect "
+                    f"{list(options.connect)}): "
+                    f"{err}"
+                ) from err
+    raise AssertionError("unreachable")
