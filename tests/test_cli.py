@@ -52,3 +52,13 @@ def test_bad_input_is_one_line_not_a_traceback(tmp_path):
         r = CliRunner().invoke(main, args)
         assert r.exit_code == 1, (args, r.output)
         assert "not a dataset gmmap can read" in r.output and "Traceback" not in r.output
+
+
+def test_a_missing_extra_is_named(monkeypatch):
+    import sys
+
+    monkeypatch.delitem(sys.modules, "gmmap.fleet.transport", raising=False)
+    monkeypatch.setitem(sys.modules, "zenoh", None)  # as if the fleet extra were not installed
+    result = CliRunner().invoke(main, ["demo", "--robots", "1"])
+    assert result.exit_code == 1
+    assert "pip install 'gmmap[fleet]'" in result.output

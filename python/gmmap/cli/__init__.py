@@ -9,9 +9,23 @@ import click
 from gmmap import __version__
 from gmmap.cli import bench, build, config, demo, eval, info, merge, robot, sim
 
+# The optional dependencies and the extra that installs each (pyproject.toml).
+EXTRAS = {
+    "zenoh": "fleet",
+    "gtsam": "fleet",
+    "rosbags": "io",
+    "PIL": "io",
+    "evo": "eval",
+    "small_gicp": "eval",
+    "matplotlib": "eval",
+    "sklearn": "eval",
+    "rerun": "viz",
+}
+
 
 class _Commands(click.Group):
-    """Bad input is the user's to fix: one line naming it, not a traceback."""
+    """Bad input is the user's to fix: one line naming it, not a traceback; so is a missing
+    extra."""
 
     def invoke(self, ctx: click.Context):
         from gmmap.errors import GmmapError
@@ -20,6 +34,13 @@ class _Commands(click.Group):
             return super().invoke(ctx)
         except (GmmapError, FileNotFoundError) as exc:
             raise click.ClickException(str(exc)) from exc
+        except ModuleNotFoundError as exc:
+            extra = EXTRAS.get((exc.name or "").split(".")[0])
+            if extra is None:
+                raise
+            raise click.ClickException(
+                f"this command needs {exc.name!r}: pip install 'gmmap[{extra}]'"
+            ) from exc
 
 
 @click.group(cls=_Commands, context_settings={"help_option_names": ["-h", "--help"]})

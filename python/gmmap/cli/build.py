@@ -8,7 +8,15 @@ from pathlib import Path
 
 import click
 
-from gmmap.cli.common import as_json_option, config_option, frame_options, open_data, setting
+from gmmap.cli.common import (
+    COVARIANCE,
+    FRAMES_PER_SUBMAP,
+    as_json_option,
+    config_option,
+    frame_options,
+    open_data,
+    setting,
+)
 from gmmap.config import Config
 
 
@@ -21,13 +29,11 @@ from gmmap.config import Config
     help="Output folder: one file per submap, index.json and config.yaml.",
 )
 @click.option("--robot", default="robot", show_default=True, help="The robot's name.")
-@setting("--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int)
+@FRAMES_PER_SUBMAP
 @setting("--strategy", "build.strategy", "How a submap is fitted.",
          type=click.Choice(["points", "gmm-merge", "per-frame"]))  # fmt: skip
 @setting("--components", "build.n_components", "Components fitted.", type=int)
-@setting(
-    "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
-)
+@COVARIANCE
 @setting("--voxel", "build.voxel_size", "Point-buffer voxel size (m).", type=float)
 @setting("--novelty", "build.min_novelty", "Skip frames adding fewer new voxels.", type=float)
 @setting("--select/--no-select", "build.select", "Adaptive model selection.")

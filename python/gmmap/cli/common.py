@@ -130,6 +130,24 @@ SIM_SETTINGS = (
 )
 
 
+# Settings several commands share.
+FRAMES_PER_SUBMAP = setting(
+    "--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int
+)
+COVARIANCE = setting(
+    "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
+)
+MIN_MATCHES = setting(
+    "--min-matches",
+    "backend.min_matches",
+    "Consistent matches before two robots' maps join.",
+    type=click.IntRange(min=1),
+)
+MIN_CONFIDENCE = setting(
+    "--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float
+)
+
+
 def sim_settings(fn: Callable) -> Callable:
     for option in reversed(SIM_SETTINGS):
         fn = option(fn)

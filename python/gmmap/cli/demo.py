@@ -24,7 +24,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from gmmap.cli.common import as_json_option, config_option, log, setting, sim_settings
+from gmmap.cli.common import MIN_MATCHES, as_json_option, config_option, log, setting, sim_settings
 from gmmap.config import Config
 from gmmap.options import SimOptions, drift_overrides
 
@@ -243,12 +243,7 @@ def format_report(r: dict) -> str:
 
 @click.command("demo")
 @sim_settings
-@setting(
-    "--min-matches",
-    "backend.min_matches",
-    "Consistent matches before two maps join.",
-    type=click.IntRange(min=1),
-)
+@MIN_MATCHES
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
 @click.option(

@@ -7,7 +7,15 @@ from pathlib import Path
 
 import click
 
-from gmmap.cli.common import as_json_option, config_option, log, setting, sim_settings
+from gmmap.cli.common import (
+    COVARIANCE,
+    FRAMES_PER_SUBMAP,
+    as_json_option,
+    config_option,
+    log,
+    setting,
+    sim_settings,
+)
 from gmmap.config import Config
 
 
@@ -132,10 +140,8 @@ def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> s
     help="A recording split into two robots (first and second half); default: the simulator.",
 )
 @sim_settings
-@setting("--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int)
-@setting(
-    "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
-)
+@FRAMES_PER_SUBMAP
+@COVARIANCE
 @setting("--top-k", "place.top_k", "Candidates verified per query.", type=int)
 @click.option("--no-gicp", is_flag=True, help="Skip the points + GICP verification baseline.")
 @click.option(

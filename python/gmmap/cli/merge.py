@@ -9,6 +9,8 @@ import click
 import numpy as np
 
 from gmmap.cli.common import (
+    MIN_CONFIDENCE,
+    MIN_MATCHES,
     as_json_option,
     config_option,
     log,
@@ -27,9 +29,8 @@ from gmmap.config import Config
 )
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
 @setting("--top-k", "place.top_k", "Candidates verified per submap.", type=int)
-@setting("--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float)
-@setting("--min-matches", "backend.min_matches", "Consistent matches before two maps join.",
-         type=click.IntRange(min=1))  # fmt: skip
+@MIN_CONFIDENCE
+@MIN_MATCHES
 @odometry_drift_option
 @click.option(
     "--wrong-matches",

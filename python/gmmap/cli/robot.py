@@ -8,6 +8,10 @@ from pathlib import Path
 import click
 
 from gmmap.cli.common import (
+    COVARIANCE,
+    FRAMES_PER_SUBMAP,
+    MIN_CONFIDENCE,
+    MIN_MATCHES,
     config_option,
     frame_options,
     log,
@@ -34,15 +38,12 @@ from gmmap.config import Config
 @setting("--peer", "transport.connect", "Zenoh endpoint of another robot.", multiple=True)
 @setting("--wait-for", "robot.wait_for", "Wait for these robots before mapping.", multiple=True)
 @setting("--store", "robot.store", "The robot's SQLite store (default: temporary).")
-@setting("--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int)
+@FRAMES_PER_SUBMAP
 @setting("--components", "build.n_components", "Components fitted.", type=int)
-@setting(
-    "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
-)
+@COVARIANCE
 @odometry_drift_option
-@setting("--min-matches", "backend.min_matches", "Consistent matches before two maps join.",
-         type=click.IntRange(min=1))  # fmt: skip
-@setting("--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float)
+@MIN_MATCHES
+@MIN_CONFIDENCE
 @setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
