@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from gmmap.config import Config
+from gmmap.config import Config, load_config
 from gmmap.eval.registration import pose_errors
 from gmmap.fleet.robot import RobotNode
 from gmmap.fleet.store import Store
@@ -188,6 +188,11 @@ def test_demo_runs_two_robot_processes(tmp_path):
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
+    # The effective tree beside the results; each robot was started with its own file.
+    assert load_config(tmp_path / "config.yaml").robot.linger == 1.5
+    own = load_config(tmp_path / "robot_1.yaml")
+    assert own.robot.name == "robot_1" and own.robot.wait_for == ("robot_0",)
+    assert own.backend.translation == 0.02  # follows the simulated drift
     for key in ("robots", "groups", "bytes_per_submap", "reduction_vs_points", "pairs", "wall_s"):
         assert key in r
     assert r["robots"] == 2 and len(r["pairs"]) == 1

@@ -2,6 +2,7 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from gmmap.config import Config, load_config
 from gmmap.errors import (
     DecodeError,
     FileFormatError,
@@ -22,6 +23,7 @@ except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "Config",
     "DecodeError",
     "FileFormatError",
     "FitInfo",
@@ -35,6 +37,7 @@ __all__ = [
     "decode",
     "encode",
     "fit_gmm",
+    "load_config",
     "register",
     "select_components",
     "voxel_filter",
