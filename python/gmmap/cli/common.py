@@ -61,7 +61,8 @@ def odometry_drift_option(fn: Callable) -> Callable:
         "--odometry-drift",
         type=float,
         help="The pose graph's odometry noise per metre (backend.translation, rotation_per_rad; "
-        "a quarter in rotation_per_m). 0.002 for motion-capture poses.  [0.02]",
+        "a quarter in rotation_per_m). 0.002 for motion-capture poses.  "
+        f"[backend.translation: {_default('backend.translation')}]",
     )(fn)
 
 
