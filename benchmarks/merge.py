@@ -24,10 +24,11 @@ from pathlib import Path
 from gmmap.config import Config
 from gmmap.eval.merge import merge
 from gmmap.io import datasets
-from gmmap.io.sim import UP, get_world, robot_sensor, simulate
+from gmmap.io.sim import UP, get_world, sim_sensor, simulate
 from gmmap.mapping.backend import BackendOptions
 from gmmap.mapping.submap import BuildOptions, build_submaps
 from gmmap.math.drift import Drift
+from gmmap.options import SimOptions
 
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
@@ -60,7 +61,7 @@ def main() -> None:
         out["tum_fr1_xyz_halves"] = {"skipped": f"{fr1} not found"}
     print("simulated office, 3 robots", file=sys.stderr)
     odometry = Drift(seed=0, up=UP)
-    run_ = simulate(get_world("office"), 3, 0, robot_sensor("lidar"), odometry=odometry)
+    run_ = simulate(get_world("office"), 3, 0, sim_sensor(SimOptions()), odometry=odometry)
     robots = {r.name: list(build_submaps(r, r.name, BUILD)) for r in run_}
     out["office_3_robots"] = run(robots)
     out["office_3_robots_wrong_0.2"] = run(robots, wrong_matches=0.2)

@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from gmmap.config import Config, load_config
-from gmmap.options import drift_overrides
+from gmmap.options import SENSORS, drift_overrides
 
 SEP = "__"  # a flag's parameter name is its config key with '.' → '__'
 
@@ -124,7 +124,7 @@ SIM_SETTINGS = (
         "--sensor",
         "sim.sensor",
         "16-beam LiDAR or 60° depth camera.",
-        type=click.Choice(["lidar", "depth"]),
+        type=click.Choice(SENSORS),
     ),
     setting("--sim-width", "sim.width", "Depth camera image width (px, 4:3).", type=int),
     setting("--sim-drift", "sim.drift", "Simulated odometry error per metre.", type=float),

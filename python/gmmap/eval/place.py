@@ -254,10 +254,11 @@ def sim_place_set(
 ) -> PlaceSet:
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
     "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
-    from gmmap.io.sim import UP, get_world, robot_sensor, simulate
+    from gmmap.io.sim import UP, get_world, sim_sensor, simulate
     from gmmap.math.drift import Drift
+    from gmmap.options import SimOptions
 
-    device = robot_sensor(sensor)
+    device = sim_sensor(SimOptions(sensor=sensor, width=640))  # the harness's 640 px camera
     run = simulate(
         get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed, up=UP)
     )

@@ -10,12 +10,11 @@ from gmmap.io.sim.run import (
     write_run,
     write_tum,
 )
-from gmmap.io.sim.sensors import ROBOT_SENSORS, DepthCamera, Lidar, robot_sensor, sim_sensor
+from gmmap.io.sim.sensors import DepthCamera, Lidar, sim_sensor
 from gmmap.io.sim.world import Box, Cylinder, World
 from gmmap.io.sim.worlds import WORLDS, get_world
 
 __all__ = [
-    "ROBOT_SENSORS",
     "UP",
     "WORLDS",
     "Box",
@@ -26,7 +25,6 @@ __all__ = [
     "SimRobot",
     "World",
     "get_world",
-    "robot_sensor",
     "route_poses",
     "sim_sensor",
     "simulate",

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gmmap.errors import InvalidInputError
 from gmmap.io.datasets.tum import Intrinsics
 from gmmap.io.sim.world import World
 from gmmap.options import SimOptions
@@ -118,17 +117,6 @@ class Lidar:
         r = r[hit] + self.noise_std * rng.standard_normal(int(hit.sum()))
         keep = (r > self.min_range) & (r < self.max_range)
         return (dirs[hit][keep] * r[keep, None]).astype(np.float32)
-
-
-ROBOT_SENSORS = ("lidar", "depth")
-
-
-def robot_sensor(kind: str, width: int = 640) -> DepthCamera | Lidar:
-    """A simulated robot's sensor by name: the default LiDAR, or the default depth camera at
-    ``width`` px (4:3)."""
-    if kind not in ROBOT_SENSORS:
-        raise InvalidInputError(f"sensor must be one of {ROBOT_SENSORS}, got {kind!r}")
-    return Lidar() if kind == "lidar" else DepthCamera.scaled(width, width * 3 // 4)
 
 
 def sim_sensor(options: SimOptions) -> DepthCamera | Lidar:
