@@ -154,6 +154,36 @@ def test_fr1_xyz_halves_merge_to_three_centimetres(shared_data):
     assert pair["t_error"] <= 0.04 and pair["r_error_deg"] <= 1.0, pair
 
 
+def test_merge_writes_tum_trajectories_that_evo_reads(tmp_path, slice_robots):
+    """Each robot's optimised anchors in the reference frame and, where the data has it, the
+    ground truth in the reference robot's true map frame: evo's own CLI compares them."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from gmmap.io.datasets.trajectory import read_trajectory
+    from gmmap.mapping.submap import write_submaps
+
+    for name, subs in slice_robots.items():
+        write_submaps(subs, tmp_path / name)
+    out = tmp_path / "out"
+    args = ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--min-confidence", "0.55"]
+    r = CliRunner().invoke(main, [*args, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    for name, subs in slice_robots.items():
+        stamps, poses = read_trajectory(out / f"trajectory_{name}.txt")
+        assert len(stamps) == len(subs) and poses.shape == (len(subs), 4, 4)
+        np.testing.assert_allclose(stamps, [s.stamps[0] for s in subs], atol=1e-6)
+    evo_ape = Path(sys.executable).with_name("evo_ape")
+    if not evo_ape.exists():
+        pytest.skip("evo's CLI (the eval extra) is not installed")
+    cmd = [str(evo_ape), "tum", str(out / "truth_b.txt"), str(out / "trajectory_b.txt")]
+    ran = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    rmse = float(next(x for x in ran.stdout.splitlines() if "rmse" in x).split()[-1])
+    assert rmse < 0.05  # the merged frame is right to a few centimetres (the test above)
+
+
 def test_global_map_rerun_recording(tmp_path, slice_points):
     from gmmap.io import viz
 

@@ -73,6 +73,9 @@ def test_two_robot_processes_share_submaps_and_agree_on_the_identity(tmp_path):
         assert r["groups"] == [["a", "b"]] and r["matches_accepted"] >= 1
         t, deg = pose_errors(np.array(r["to_reference"]["b"]), np.eye(4))
         assert t < 0.05 and deg < 2.0
+        for robot in ("a", "b"):  # every held robot's anchors, in the reference frame
+            traj = tmp_path / f"{name}.trajectory_{robot}.txt"
+            assert r["trajectories"] and len(traj.read_text().splitlines()) == 1 + 2
         stats = r["bytes"]["by_robot_and_kind"]
         sent = stats["sent"][name]["submap"]  # published, plus fetch replies served
         published = sent["payload_bytes"] - sent["fetch_payload_bytes"]

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from gmmap.config import Config, load_config
 from gmmap.options import SENSORS, drift_overrides
@@ -157,3 +158,32 @@ def sim_settings(fn: Callable) -> Callable:
 
 def as_json_option(fn: Callable) -> Callable:
     return click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")(fn)
+
+
+def save_trajectories(mapper, folder: Path, prefix: str = "") -> list[Path]:
+    """Every held robot's optimised anchor trajectory, in its group's reference frame, as a
+    TUM file ``<prefix>trajectory_<robot>.txt`` (stamp: the anchor frame's; evo reads it)."""
+    from gmmap.io.datasets.trajectory import write_trajectory
+
+    result = mapper.result
+    if result is None:
+        return []
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for robot in sorted({r for r, _ in mapper.submaps}):
+        subs = sorted((s for (r, _), s in mapper.submaps.items() if r == robot), key=_seq)
+        poses = np.array([result.poses[(robot, s.seq)] for s in subs])
+        path = folder / f"{prefix}trajectory_{robot}.txt"
+        header = f"gmmap: {robot}'s anchors in {mapper.frames.reference(robot)}'s frame"
+        write_trajectory(path, anchor_stamps(subs), poses, header=header)
+        written.append(path)
+    return written
+
+
+def _seq(submap) -> int:
+    return submap.seq
+
+
+def anchor_stamps(submaps) -> np.ndarray:
+    """Each submap's anchor stamp: its first frame's (the anchor is that frame's pose)."""
+    return np.array([float(s.stamps[0]) if len(s.stamps) else float(s.seq) for s in submaps])

@@ -11,10 +11,12 @@ import numpy as np
 from gmmap.cli.common import (
     MIN_CONFIDENCE,
     MIN_MATCHES,
+    anchor_stamps,
     as_json_option,
     config_option,
     log,
     odometry_drift_option,
+    save_trajectories,
     setting,
 )
 from gmmap.config import Config
@@ -50,16 +52,22 @@ def command(
     as_json: bool,
 ) -> None:
     """Merge submap folders of several robots (from `gmmap build`): place recognition,
-    registration, the robust pose graph and a global map per connected group."""
+    registration, the robust pose graph and a global map per connected group.
+
+    With --out: the global maps (npz, ply, png, rrd), each robot's optimised anchor trajectory
+    in its reference robot's frame as TUM text (trajectory_<robot>.txt; with ground truth,
+    truth_<robot>.txt beside it, for evo_ape), merge.json and config.yaml."""
     from gmmap.eval.merge import merge
 
     submaps = read_folders(folders)
     mapper, report = merge(submaps, config, log, wrong_matches, seed)
     if out:
         save_maps(mapper.global_maps(log), out)
+        save_trajectories(mapper, out)
+        save_truth(mapper, submaps, out)
         (out / "merge.json").write_text(json.dumps(report, indent=1))
         config.save(out)
-        log(f"wrote the global map(s), merge.json and config.yaml to {out}")
+        log(f"wrote the global map(s), trajectories, merge.json and config.yaml to {out}")
     click.echo(json.dumps(report) if as_json else describe(report, len(submaps)))
 
 
@@ -78,6 +86,25 @@ def read_folders(folders: tuple[Path, ...]) -> dict:
             )
         submaps[subs[0].robot] = subs
     return submaps
+
+
+def save_truth(mapper, submaps: dict, out: Path) -> None:
+    """Beside each ``trajectory_<robot>.txt``, ``truth_<robot>.txt``: the anchors' ground truth
+    in the reference robot's true map frame, where every submap of both carries it (then
+    ``evo_ape tum truth_b.txt trajectory_b.txt`` compares them as they are)."""
+    from gmmap.eval.merge import map_to_world
+    from gmmap.io.datasets.trajectory import write_trajectory
+    from gmmap.math.geometry import invert
+
+    for robot, subs in sorted(submaps.items()):
+        ref = mapper.frames.reference(robot)
+        if any(s.gt_anchor is None for s in (*subs, *submaps[ref])):
+            continue
+        to_ref = invert(map_to_world(submaps[ref]))
+        ordered = sorted(subs, key=lambda s: s.seq)
+        truth = np.array([to_ref @ s.gt_anchor for s in ordered])
+        header = f"ground truth of {robot}'s anchors in {ref}'s true map frame"
+        write_trajectory(out / f"truth_{robot}.txt", anchor_stamps(ordered), truth, header=header)
 
 
 def save_maps(maps: dict, out: Path) -> None:

@@ -17,6 +17,7 @@ from gmmap.cli.common import (
     log,
     odometry_drift_option,
     open_data,
+    save_trajectories,
     setting,
     sim_settings,
 )
@@ -72,7 +73,10 @@ def command(
     as_json: bool,
     config: Config,
 ) -> None:
-    """Run one robot node: map, share submaps over Zenoh, match, optimise, report."""
+    """Run one robot node: map, share submaps over Zenoh, match, optimise, report.
+
+    With --report R.json: R.config.yaml and, per robot held, R.trajectory_<robot>.txt (its
+    optimised anchors in its group's reference frame, TUM format) beside it."""
     from gmmap.fleet.robot import Built
     from gmmap.fleet.runner import run_robot
 
@@ -91,8 +95,18 @@ def command(
                 f"{line['received']} received, {line['matches']} matches, groups {line['groups']}"
             )
 
-    on_map = (lambda gmap: save_map(gmap, map_png)) if map_png is not None else None
-    r = run_robot(config, frames, report_path, on_map, on_built, log)
+    def on_finish(mapper) -> dict:
+        saved: dict = {}
+        if report_path is not None:  # the trajectories beside the report
+            prefix = f"{report_path.stem}."
+            paths = save_trajectories(mapper, report_path.parent, prefix)
+            saved["trajectories"] = [str(p) for p in paths]
+        gmap = mapper.global_map(config.robot.name) if map_png is not None else None
+        if gmap is not None:
+            saved.update(save_map(gmap, map_png))
+        return saved
+
+    r = run_robot(config, frames, report_path, on_finish, on_built, log)
     if report_path is not None:  # the effective configuration beside the report
         config.save(report_path.with_suffix(".config.yaml"))
     if truth_path is not None:

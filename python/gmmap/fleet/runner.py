@@ -17,7 +17,7 @@ from gmmap.mapping.frame import Frame
 
 if TYPE_CHECKING:
     from gmmap.mapping.backend import BackendResult
-    from gmmap.mapping.globalmap import GlobalMap
+    from gmmap.mapping.mapper import Mapper
 
 try:
     import resource
@@ -29,13 +29,14 @@ def run_robot(
     config: Config,
     frames: Sequence[Frame],
     report_path: Path | None = None,
-    on_map: Callable[[GlobalMap], dict] | None = None,
+    on_finish: Callable[[Mapper], dict] | None = None,
     on_built: BuiltCallback | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> dict:
     """Run a node over ``frames``, linger, report, shut down. SIGINT/SIGTERM stop it cleanly
-    (the report is still written, with what was done). ``on_map`` receives the merged map of
-    the robot's group at the end (to save it) and returns what to add to the report."""
+    (the report is still written, with what was done). ``on_finish`` receives the node's
+    mapper at the end, unless interrupted (to save its map, trajectories, …), and returns what
+    to add to the report."""
     import signal
 
     say = progress or (lambda _m: None)
@@ -68,9 +69,8 @@ def run_robot(
         node.linger(config.robot.linger)
         report = node.report()
         report["interrupted"] = stopped.is_set()
-        gmap = node.global_map() if on_map is not None and not stopped.is_set() else None
-        if gmap is not None:
-            report.update(on_map(gmap))
+        if on_finish is not None and not stopped.is_set():
+            report.update(on_finish(node.mapper))
         if report_path is not None:
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
