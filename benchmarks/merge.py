@@ -9,7 +9,12 @@ matches how many were rejected:
 - TUM fr1_xyz split at frame 398 into two robots (when ``../shared/data`` is there), with the
   default odometry noise and with 0.002 (its poses are motion capture);
 - the simulated office, 3 LiDAR robots with drifting odometry, clean and with 20 % of the
-  verified matches replaced by wrong ones.
+  verified matches replaced by wrong ones;
+- cross-session cases (`gmmap.eval.sessions`, the defaults; joined or not, frame errors,
+  verified precision and recall, points + GICP on the same candidates, the data's floor):
+  fr1_xyz's first 400 frames against the recording re-sampled at 10 Hz from frame 201, and
+  fr3 cabinet's loop (keyframes 0-14 against 43-57, which see the same side; 3 keyframes per
+  submap, motion-capture odometry noise).
 
     .venv/bin/python benchmarks/merge.py
 """
@@ -19,10 +24,12 @@ from __future__ import annotations
 import json
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from gmmap.config import Config
 from gmmap.eval.merge import merge
+from gmmap.eval.sessions import evaluate_sessions
 from gmmap.io import datasets
 from gmmap.io.sim import UP, get_world, sim_sensor, simulate
 from gmmap.mapping.backend import BackendOptions
@@ -65,7 +72,40 @@ def main() -> None:
     robots = {r.name: list(build_submaps(r, r.name, BUILD)) for r in run_}
     out["office_3_robots"] = run(robots)
     out["office_3_robots_wrong_0.2"] = run(robots, wrong_matches=0.2)
+    out.update(cross_sessions())
     print(json.dumps(out, indent=1))
+
+
+SESSION_KEYS = ("sessions", "joined", "frame_t_error", "frame_r_error_deg", "positives",
+                "candidates", "verified", "precision", "recall", "candidates_registered_right",
+                "gicp", "floor")  # fmt: skip
+
+
+def cross_sessions() -> dict:
+    """The cross-session cases of the module docstring (skipped without the shared data)."""
+    fr1, cabinet = DATA / "tum_fr1_xyz", DATA / "tum_fr3_cabinet_keyframes"
+    if not (fr1.exists() and cabinet.exists()):
+        return {"cross_session": {"skipped": f"{DATA} lacks fr1_xyz or fr3 cabinet"}}
+    cases = {}
+    frames = datasets.open(fr1)
+    resampled = [frames[i] for i in range(201, len(frames), 3)]
+    cases["tum_fr1_xyz_second_session_10hz"] = (frames[0:400], resampled, Config())
+    frames = datasets.open(cabinet)
+    config = Config(
+        build=replace(Config().build, frames_per_submap=3),
+        backend=BackendOptions.for_drift(0.002),
+    )
+    cases["tum_fr3_cabinet_loop"] = (frames[0:15], frames[43:], config)
+    out = {}
+    for name, (a, b, config) in cases.items():
+        print(name, file=sys.stderr)
+        sessions = {
+            robot: list(build_submaps(part, robot, config.build, config.select))
+            for robot, part in (("a", a), ("b", b))
+        }
+        r = evaluate_sessions(sessions, config)
+        out[name] = {k: r[k] for k in SESSION_KEYS}
+    return out
 
 
 if __name__ == "__main__":

@@ -194,3 +194,38 @@ def test_global_map_rerun_recording(tmp_path, slice_points):
     path = viz.save_rerun(gmap, tmp_path / "map.rrd", n_points=2_000)
     data = path.read_bytes()
     assert data[:4] == b"RRF2" and len(data) > 2_000 * 12
+
+
+SESSION_KEYS = {"joined", "frame_t_error", "frame_r_error_deg", "precision", "recall"}
+
+
+def test_eval_merge_reports_sessions_against_truth():
+    """Two slices of the bundled recording as two sessions: joined, and every key outside
+    checks read."""
+    s = str(BUNDLED_TUM_SLICE)
+    args = ["eval", "merge", f"{s}@0:4", f"{s}@4:8", "--stride", "2", "--json"]
+    r = CliRunner().invoke(main, [*args, "--frames-per-submap", "2", "--min-confidence", "0.55"])
+    assert r.exit_code == 0, r.output
+    report = json.loads(r.stdout)
+    assert SESSION_KEYS | {"gicp", "floor"} <= set(report)
+    assert report["joined"] and report["precision"] == 1.0
+    assert report["frame_t_error"] < 0.05 and report["frame_r_error_deg"] < 2.0
+    assert report["floor"]["n"] >= 1 and report["gicp"]["candidates_registered_right"] >= 1
+    bad = CliRunner().invoke(main, ["eval", "merge", f"{s}@a:b"])
+    assert bad.exit_code == 2 and "PATH@START:STOP" in bad.output
+
+
+def test_fr1_xyz_as_a_second_session_joins(shared_data):
+    """fr1_xyz's first 400 frames against the whole recording re-sampled at 10 Hz from another
+    start (other submap boundaries): the maps join, on correct matches only."""
+    from gmmap.eval.sessions import evaluate_sessions
+
+    frames = TumRgbd(shared_data / "tum_fr1_xyz")
+    build = BuildOptions()
+    sessions = {
+        "a": list(build_submaps(frames[0:400], "a", build)),
+        "b": list(build_submaps([frames[i] for i in range(201, len(frames), 3)], "b", build)),
+    }
+    r = evaluate_sessions(sessions, gicp=False)
+    assert r["joined"] and r["precision"] == 1.0 and r["verified"] >= 10
+    assert r["frame_t_error"] < 0.05 and r["frame_r_error_deg"] < 1.5

@@ -10,9 +10,11 @@ import click
 from gmmap.cli.common import (
     COVARIANCE,
     FRAMES_PER_SUBMAP,
+    MIN_CONFIDENCE,
     as_json_option,
     config_option,
     log,
+    odometry_drift_option,
     setting,
     sim_settings,
 )
@@ -21,7 +23,8 @@ from gmmap.config import Config
 
 @click.group("eval")
 def command() -> None:
-    """The paper's experiments against ground truth (Table I, …)."""
+    """The paper's experiments against ground truth (Table I, Fig. 7-8, Table II) and the
+    cross-session merge."""
 
 
 @command.command("registration")
@@ -236,3 +239,86 @@ def eval_planner(
             for m in (s["astar"], s["gmm"])
         ]
         click.echo(f"{name:<15}{cells[0]:>28}{cells[1]:>28}")
+
+
+@command.command("merge")
+@click.argument("sessions", nargs=-1, required=True)
+@FRAMES_PER_SUBMAP
+@COVARIANCE
+@MIN_CONFIDENCE
+@odometry_drift_option
+@click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
+@click.option("--no-gicp", is_flag=True, help="Skip the points + GICP baseline and the floor.")
+@config_option
+@as_json_option
+def eval_merge(
+    sessions: tuple[str, ...], stride: int | None, no_gicp: bool, config: Config, as_json: bool
+) -> None:
+    """Merge recordings of one place made at different times, each one robot, against ground
+    truth: joined or not, frame errors, verified precision and recall, beside points + GICP
+    verification on the same candidates and the data's floor (GICP started at the truth).
+
+    SESSIONS are dataset paths, each optionally sliced as PATH@START:STOP[:STEP] (a Python
+    slice of its frames; e.g. a 30 Hz recording @5::3 is another 10 Hz session of it)."""
+    from gmmap.eval.sessions import evaluate_sessions
+    from gmmap.mapping.submap import build_submaps
+
+    built = {}
+    for i, spec in enumerate(sessions):
+        frames = _session_frames(spec, stride)
+        name = f"s{i}"
+        log(f"{name}: building {len(frames)} frames of {spec}")
+        built[name] = list(build_submaps(iter(frames), name, config.build, config.select))
+        if not built[name]:
+            raise click.BadParameter(f"{spec}: no submaps", param_hint="SESSIONS")
+    r = evaluate_sessions(built, config, log, gicp=not no_gicp)
+    r["paths"] = dict(zip(built, sessions, strict=True))
+    click.echo(json.dumps(r) if as_json else _sessions_summary(r))
+
+
+def _session_frames(spec: str, stride: int | None):
+    from gmmap.cli.common import Frames, open_data
+
+    path, _, cut = spec.partition("@")
+    if not Path(path).exists():
+        raise click.BadParameter(f"{path}: no such dataset", param_hint="SESSIONS")
+    frames = open_data(Path(path), stride)
+    if not cut:
+        return frames
+    try:
+        parts = [int(x) if x.strip() else None for x in cut.split(":")]
+        chosen = range(len(frames))[slice(*parts)]
+    except (ValueError, TypeError):
+        raise click.BadParameter(f"{spec!r}: not PATH@START:STOP[:STEP]") from None
+    return Frames(frames, chosen)
+
+
+def _sessions_summary(r: dict) -> str:
+    def pct(x):
+        return "—" if x is None else f"{x:.0%}"
+
+    lines = [f"sessions {r['paths']}: {r['sessions']} submaps"]
+    if r["joined"]:
+        lines.append(
+            f"joined: map frames {r['frame_t_error'] * 100:.1f} cm, "
+            f"{r['frame_r_error_deg']:.2f}° off the truth (worst pair)"
+        )
+    else:
+        lines.append(f"not joined: groups {r['merge']['groups']}")
+    lines.append(
+        f"{r['candidates']} candidates, {r['verified']} verified, {r['positives']} positive pairs;"
+        f" precision {pct(r['precision'])}, recall {pct(r['recall'])};"
+        f" {r['candidates_registered_right']} candidates registered right"
+    )
+    if "gicp" in r:
+        g, f = r["gicp"], r["floor"]
+        lines.append(
+            f"points + GICP: {g['candidates_registered_right']} registered right, recall at "
+            f"100 % precision {pct(g['recall_at_full_precision'])}"
+        )
+        if f["n"]:
+            lines.append(
+                f"floor (GICP from the truth, {f['n']} pairs): median "
+                f"{f['t_median'] * 100:.1f} cm / {f['r_median_deg']:.2f}°"
+            )
+    return "\n".join(lines)

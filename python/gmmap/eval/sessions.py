@@ -1,0 +1,128 @@
+"""Cross-session merging against ground truth (``gmmap eval merge``): did the maps join, how right
+are their frames, how good was the verification, and what does the data allow.
+
+Each session (a recording, or a slice of one) is one robot. The sessions are merged with the
+library's pipeline (`gmmap.eval.merge.merge`, the defaults unless a configuration says
+otherwise), then, from the outside:
+
+- ``joined``: all sessions ended in one group; ``frame_t_error`` / ``frame_r_error_deg``: the
+  worst robot pair's map-frame error against the truth (None when not joined);
+- ``precision`` / ``recall`` of the verified (accepted) matches: a match is correct when its
+  two submaps are a positive (views overlapping at the truth, `gmmap.eval.place.positives`) and
+  its transform is within 0.2 m and 3° of the truth; recall counts over every positive pair of
+  the sessions, found by place recognition or not;
+- ``gicp``: the points + GICP verification (small_gicp, the same yaw starts) on the same
+  candidates: how many it registers correctly, and its recall at 100 % precision when its
+  inlier fraction is the score;
+- ``floor``: GICP on the positive candidates' points started at the truth, and how far it moves
+  away: what two sessions' poses and smeared submaps agree to at best.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+from gmmap.config import Config
+from gmmap.eval.merge import merge
+from gmmap.eval.place import is_correct, positives, pr_curve, truth, verify_gicp
+from gmmap.eval.registration import error_summary, pose_errors
+from gmmap.mapping.place import Match
+from gmmap.mapping.submap import Submap
+
+GICP_VOXEL = 0.2  # the points + GICP verification's, as in `gmmap eval place`
+
+
+def evaluate_sessions(
+    sessions: Mapping[str, Sequence[Submap]],
+    config: Config | None = None,
+    progress: Callable[[str], None] | None = None,
+    gicp: bool = True,
+) -> dict:
+    """The report described in the module docstring, plus the merge's own report."""
+    mapper, report = merge(sessions, config, progress)
+    held = {(s.robot, s.seq): s for subs in sessions.values() for s in subs}
+    order = list(held)
+    pos = positives([held[k] for k in order])
+    index = {k: i for i, k in enumerate(order)}
+    pairs = [p for p in report.get("pairs", []) if p["frame_t_error"] is not None]
+    joined = len(report["groups"]) == 1
+    out = {
+        "sessions": {name: len(subs) for name, subs in sessions.items()},
+        "joined": joined,
+        "frame_t_error": max((p["frame_t_error"] for p in pairs), default=None) if joined else None,
+        "frame_r_error_deg": (
+            max((p["frame_r_error_deg"] for p in pairs), default=None) if joined else None
+        ),
+        "positives": int(pos.sum() // 2),
+        "candidates": len(mapper.matches),
+        **verification(mapper.matches, held, pos, index),
+        "merge": report,
+    }
+    if gicp:
+        out["gicp"] = gicp_verification(mapper.matches, held, pos, index, out["positives"])
+        voxel = (config or Config()).build.voxel_size
+        out["floor"] = floor(mapper.matches, held, pos, index, voxel)
+    return out
+
+
+def _pair(m: Match, held: Mapping) -> tuple[Submap, Submap]:
+    return held[m.query], held[(m.candidate.robot, m.candidate.seq)]
+
+
+def _positive(m: Match, pos: np.ndarray, index: Mapping) -> bool:
+    return bool(pos[index[m.query], index[(m.candidate.robot, m.candidate.seq)]])
+
+
+def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping) -> dict:
+    """Precision and recall of the accepted matches, and how many candidates registered right."""
+    right = [_positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
+             for m in matches]  # fmt: skip
+    accepted = [m.accepted for m in matches]
+    n_positive = int(pos.sum() // 2)
+    correct_accepted = sum(r and a for r, a in zip(right, accepted, strict=True))
+    return {
+        "verified": sum(accepted),
+        "precision": correct_accepted / sum(accepted) if any(accepted) else None,
+        "recall": correct_accepted / n_positive if n_positive else None,
+        "candidates_registered_right": sum(right),
+    }
+
+
+def gicp_verification(
+    matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping, n_positive: int
+) -> dict:
+    """Points + GICP on the same candidates, scored by the inlier fraction."""
+    scores, right = [], []
+    for m in matches:
+        source, target = _pair(m, held)
+        score, T = verify_gicp(source, target, GICP_VOXEL)
+        scores.append(score)
+        right.append(_positive(m, pos, index) and is_correct(T, source, target))
+    curve = pr_curve(np.array(scores), np.array(right), max(1, n_positive)) if matches else None
+    return {
+        "candidates_registered_right": sum(right),
+        "recall_at_full_precision": curve["recall_at_full_precision"] if curve else None,
+    }
+
+
+def floor(
+    matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping, voxel: float
+) -> dict:
+    """GICP on the points (at the submaps' ``voxel``) started at the truth on each positive
+    candidate: how far it moves (m, °)."""
+    import small_gicp
+
+    moved = []
+    for m in (m for m in matches if _positive(m, pos, index)):
+        source, target = _pair(m, held)
+        tgt, tree = small_gicp.preprocess_points(target.points.astype(float), voxel, 10, 1)
+        src, _ = small_gicp.preprocess_points(source.points.astype(float), voxel, 10, 1)
+        T = truth(source, target)
+        result = small_gicp.align(
+            tgt, src, tree, T, registration_type="GICP",
+            max_correspondence_distance=2 * voxel, num_threads=1,
+        )  # fmt: skip
+        moved.append(pose_errors(result.T_target_source, T))
+    return error_summary(moved)
