@@ -227,6 +227,29 @@ def test_min_matches_holds_a_lone_match_back_until_a_consistent_one_arrives() ->
         BackendOptions(min_matches=0)
 
 
+def test_a_consistent_minority_of_the_verified_matches_does_not_join() -> None:
+    """Two matches that agree among five verified ones that do not: ambiguous geometry (the
+    fr3 cabinet loop's wrong join had this shape), held back until the agreeing ones are at
+    least ``min_consistent_share`` of them."""
+    world = World({"a": 0, "b": 10}, seed=3, drift=LOW_DRIFT)
+    pg = world.graph()
+    agreeing = [pg.add_match(*world.true_match("a", "b", i), INFO) for i in (12, 20)]
+    wrong = [pg.add_match(*world.wrong_match("a", "b"), INFO) for _ in range(3)]
+    result = pg.optimize()
+    assert result.groups == [["a"], ["b"]]
+    assert {result.rejected[e] for e in agreeing} == {"ambiguous"}
+    assert {result.rejected[e] for e in wrong} == {"pcm"}
+    pg.add_match(*world.true_match("a", "b", 28), INFO)  # now 3 of 6 agree
+    result = pg.optimize()
+    assert result.groups == [["a", "b"]] and len(result.accepted) == 3
+    off = world.graph(BackendOptions(min_consistent_share=0.0))
+    for e in (*[world.true_match("a", "b", i) for i in (12, 20)], world.wrong_match("a", "b")):
+        off.add_match(*e, INFO)
+    assert off.optimize().groups == [["a", "b"]]
+    with pytest.raises(InvalidInputError, match="min_consistent_share"):
+        BackendOptions(min_consistent_share=1.5)
+
+
 def test_wrong_matches_are_rejected_by_pcm() -> None:
     world = World({"a": 0, "b": 10}, seed=4)
     pg, oracle = world.graph(), world.graph()

@@ -183,6 +183,10 @@ class BackendOptions:
     # fewer are held back ("pending") until more arrive. 1 trusts a single match, which PCM
     # cannot test; 2 stops a lone aliased match (a corridor seen end for end) from joining.
     min_matches: int = 1
+    # ... and only while the consistent set is at least this share of all the matches verified
+    # between them: most verified matches disagreeing is ambiguous geometry (a floor that fills
+    # every mixture, a symmetric object seen from the other side), not two matched places.
+    min_consistent_share: float = 0.5
     gnc: bool = True
     gnc_probability: float = 0.99  # χ² quantile of GNC's inlier threshold
     prior_sigma: float = 1e-4  # the reference prior (m and rad)
@@ -206,6 +210,8 @@ class BackendOptions:
                 raise InvalidInputError(f"BackendOptions.{name} must be > 0")
         if int(self.min_matches) != self.min_matches or self.min_matches < 1:
             raise InvalidInputError("BackendOptions.min_matches must be an integer >= 1")
+        if not 0 <= self.min_consistent_share <= 1:
+            raise InvalidInputError("BackendOptions.min_consistent_share must be in [0, 1]")
         for name in ("pcm_probability", "gnc_probability"):
             if not 0 < getattr(self, name) < 1:
                 raise InvalidInputError(f"BackendOptions.{name} must be in (0, 1)")

@@ -97,8 +97,9 @@ class BackendResult:
     ``poses``: optimised anchor poses, each in its group's reference frame (= the reference
     robot's map frame). ``to_reference[r]`` maps robot r's map frame into its reference's
     (identity for a reference robot; see `PoseGraph` for the estimator). ``rejected`` maps an
-    edge id to why: "confidence", "pcm", "pending" (fewer than ``min_matches`` between its
-    robots) or "gnc". ``edges`` maps every edge id to its (target, source) nodes.
+    edge id to why: "pcm", "pending" (fewer than ``min_matches`` between its robots),
+    "ambiguous" (the consistent set under ``min_consistent_share`` of their verified matches)
+    or "gnc". ``edges`` maps every edge id to its (target, source) nodes.
     """
 
     poses: dict[Node, np.ndarray]
@@ -288,11 +289,15 @@ class PoseGraph:
                 kept += [pair[k] for k in inliers]
                 rejected.update({pair[k].id: "pcm" for k in set(range(len(pair))) - inliers})
             candidates = sorted(kept, key=lambda m: m.id)
-        if o.min_matches > 1:
-            for (a, b), pair in by_robot_pair(candidates).items():
-                if a != b and len(pair) < o.min_matches:
-                    rejected.update({m.id: "pending" for m in pair})
-            candidates = [m for m in candidates if m.id not in rejected]
+        verified = {key: len(pair) for key, pair in by_robot_pair(list(self._matches)).items()}
+        for (a, b), pair in by_robot_pair(candidates).items():
+            if a == b:
+                continue
+            if len(pair) < o.min_matches:
+                rejected.update({m.id: "pending" for m in pair})
+            elif len(pair) < o.min_consistent_share * verified[(a, b)]:
+                rejected.update({m.id: "ambiguous" for m in pair})
+        candidates = [m for m in candidates if m.id not in rejected]
         return candidates, rejected, exact
 
     def _pcm(self, pair: list[Match]) -> tuple[set[int], bool]:
