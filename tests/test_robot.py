@@ -88,6 +88,18 @@ def frames():
     return TumRgbd(BUNDLED_TUM_SLICE, stride=2)
 
 
+_OPEN: list[RobotNode] = []
+
+
+@pytest.fixture(autouse=True)
+def _close_nodes():
+    """Every node a test opened is closed, even when the test fails half-way (an open Zenoh
+    session would outlive the test and keep the interpreter from exiting)."""
+    yield
+    while _OPEN:
+        _OPEN.pop().stop()
+
+
 def node(tmp_path, name, port, peers=(), fleet="f"):
     config = Config(
         robot=RobotOptions(name=name, fleet=fleet, store=str(tmp_path / f"{name}.db")),
@@ -95,7 +107,8 @@ def node(tmp_path, name, port, peers=(), fleet="f"):
         build=SLICE_BUILD,
         place=SLICE_PLACE,
     )
-    return RobotNode(config)
+    _OPEN.append(RobotNode(config))
+    return _OPEN[-1]
 
 
 def wait(cond, timeout=15.0):
