@@ -220,9 +220,9 @@ class BackendOptions:
 
 
 def drift_overrides(drift: float) -> dict[str, float]:
-    """The odometry fields of `BackendOptions` for one drift figure, shaped like
-    `gmmap.math.drift.Drift.per_metre`: ``drift`` per metre per axis and rad per radian turned,
-    a quarter of it in rad per metre."""
+    """The drift model's fields for one drift figure (`gmmap.math.drift.Drift.per_metre`, the
+    odometry fields of `BackendOptions`): ``drift`` per metre per axis and rad per radian
+    turned, a quarter of it in rad per metre."""
     return {"translation": drift, "rotation_per_rad": drift, "rotation_per_m": drift / 4}
 
 

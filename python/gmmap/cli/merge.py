@@ -92,17 +92,15 @@ def save_truth(mapper, submaps: dict, out: Path) -> None:
     """Beside each ``trajectory_<robot>.txt``, ``truth_<robot>.txt``: the anchors' ground truth
     in the reference robot's true map frame, where every submap of both carries it (then
     ``evo_ape tum truth_b.txt trajectory_b.txt`` compares them as they are)."""
-    from gmmap.eval.merge import map_to_world
+    from gmmap.eval.merge import truth_in_reference
     from gmmap.io.datasets.trajectory import write_trajectory
-    from gmmap.math.geometry import invert
 
     for robot, subs in sorted(submaps.items()):
         ref = mapper.frames.reference(robot)
         if any(s.gt_anchor is None for s in (*subs, *submaps[ref])):
             continue
-        to_ref = invert(map_to_world(submaps[ref]))
         ordered = sorted(subs, key=lambda s: s.seq)
-        truth = np.array([to_ref @ s.gt_anchor for s in ordered])
+        truth = truth_in_reference(ordered, submaps[ref])
         header = f"ground truth of {robot}'s anchors in {ref}'s true map frame"
         write_trajectory(out / f"truth_{robot}.txt", anchor_stamps(ordered), truth, header=header)
 

@@ -105,6 +105,13 @@ def map_to_world(subs: Sequence[Submap]) -> np.ndarray:
     return first.gt_anchor @ invert(first.anchor)
 
 
+def truth_in_reference(subs: Sequence[Submap], reference: Sequence[Submap]) -> np.ndarray:
+    """The true anchors of ``subs`` in the true map frame of the robot whose submaps are
+    ``reference``: the frame its optimised poses are in."""
+    to_reference = invert(map_to_world(reference))
+    return np.array([to_reference @ s.gt_anchor for s in subs])
+
+
 def truth_errors(submaps: Submaps, b: BackendResult) -> dict:
     """Every robot pair's relative pose errors (`gmmap.eval.pairs`: where they met, and their
     map frames), and the ATE (evo) of the anchors in the reference frame, as they are and
@@ -117,7 +124,7 @@ def truth_errors(submaps: Submaps, b: BackendResult) -> dict:
         for s in subs:
             before.append(b.to_reference[r] @ s.anchor)
             after.append(b.poses[(r, s.seq)])
-            true.append(invert(frames[b.reference[r]]) @ s.gt_anchor)
+        true.extend(truth_in_reference(subs, submaps[b.reference[r]]))
     before, after, true = np.array(before), np.array(after), np.array(true)
     return {
         "pairs": pair_errors(b.groups, submaps, b.poses, truth, kept, b.to_reference, frames),

@@ -30,6 +30,7 @@ import numpy as np
 
 from gmmap.errors import InvalidInputError
 from gmmap.math.geometry import invert, rotation_angle, so3_exp
+from gmmap.options import drift_overrides
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class Drift:
     ) -> Drift:
         """The defaults' shape scaled by one figure: ``drift`` of the distance per axis and rad
         per radian turned, a quarter of it in rad per metre (0.02 gives the defaults)."""
-        return cls(drift, 0.0, drift, drift / 4, 0.0, seed, up)
+        return cls(**drift_overrides(drift), seed=seed, up=up)
 
     def __call__(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         return apply_drift(poses, self, rng)
