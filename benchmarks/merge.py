@@ -77,7 +77,8 @@ def main() -> None:
 
 
 SESSION_KEYS = ("sessions", "joined", "frame_t_error", "frame_r_error_deg", "positives",
-                "candidates", "verified", "precision", "recall", "candidates_registered_right",
+                "candidates", "verified", "precision", "kept_precision", "recall",
+                "candidates_registered_right",
                 "gicp", "floor")  # fmt: skip
 
 

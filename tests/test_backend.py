@@ -1,5 +1,6 @@
 import itertools
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import gtsam
@@ -24,6 +25,7 @@ SIGMA_R, SIGMA_T = 0.005, 0.02  # match noise
 INFO = np.linalg.inv(np.diag([SIGMA_R**2] * 3 + [SIGMA_T**2] * 3))
 DRIFT = Drift(translation=0.02, rotation_per_rad=0.02, rotation_per_m=0.005)  # Drift's defaults
 LOW_DRIFT = Drift(translation=0.005, rotation_per_rad=0.005, rotation_per_m=0.001)
+ONE_MATCH = BackendOptions(min_matches=1)
 
 
 def random_pose(rng: np.random.Generator, angle: float = 1.0, scale: float = 3.0) -> np.ndarray:
@@ -62,7 +64,9 @@ class World:
         return invert(self.G[ref][0]) @ self.G[robot][0]
 
     def graph(self, options: BackendOptions | None = None) -> PoseGraph:
-        pg = PoseGraph(options)
+        """A graph with the odometry; by default one match may join (PCM and GNC are what
+        these tests exercise; the join rule has its own tests)."""
+        pg = PoseGraph(options or ONE_MATCH)
         for r, odo in self.odo.items():
             for i, T in enumerate(odo):
                 pg.add_submap(r, i, T)
@@ -170,7 +174,7 @@ def test_pcm_statistic_is_chi2_for_true_matches() -> None:
     tiny |= dict(translation_floor=1e-6, rotation_floor=1e-6)
     for seed in range(24):
         world = World({"a": 0, "b": 7}, seed)
-        pg = world.graph(BackendOptions(**tiny))
+        pg = world.graph(replace(ONE_MATCH, **tiny))
         for i in range(0, N, 3):
             pg.add_match(*world.true_match("a", "b", i), INFO)
         m = pg._pairwise_mahalanobis(pg.matches)
@@ -212,7 +216,7 @@ def test_two_robots_one_true_match_recovers_the_frame() -> None:
 
 def test_min_matches_holds_a_lone_match_back_until_a_consistent_one_arrives() -> None:
     world = World({"a": 0, "b": 10}, seed=2, drift=LOW_DRIFT)
-    pg = world.graph(BackendOptions(min_matches=2))
+    pg = world.graph(BackendOptions(min_matches=2, min_strong_matches=2))
     first = pg.add_match(*world.wrong_match("a", "b"), INFO)
     result = pg.optimize()
     assert result.groups == [["a"], ["b"]] and result.rejected == {first: "pending"}
@@ -225,6 +229,18 @@ def test_min_matches_holds_a_lone_match_back_until_a_consistent_one_arrives() ->
     assert result.accepted == [second, third] and result.rejected == {first: "pcm"}
     with pytest.raises(InvalidInputError, match="min_matches"):
         BackendOptions(min_matches=0)
+
+
+def test_weak_matches_need_more_agreement_than_strong_ones() -> None:
+    """The defaults: three consistent matches of confidence >= 0.75 join two maps, weaker ones
+    only four at a time."""
+    world = World({"a": 0, "b": 10}, seed=2, drift=LOW_DRIFT)
+    for confidence, needed in ((0.8, 3), (0.6, 4)):
+        pg = world.graph(BackendOptions())
+        for k, i in enumerate((8, 12, 16, 20)):
+            pg.add_match(*world.true_match("a", "b", i), INFO, confidence)
+            joined = pg.optimize().groups == [["a", "b"]]
+            assert joined == (k + 1 >= needed), (confidence, k)
 
 
 def test_a_consistent_minority_of_the_verified_matches_does_not_join() -> None:
@@ -242,7 +258,7 @@ def test_a_consistent_minority_of_the_verified_matches_does_not_join() -> None:
     pg.add_match(*world.true_match("a", "b", 28), INFO)  # now 3 of 6 agree
     result = pg.optimize()
     assert result.groups == [["a", "b"]] and len(result.accepted) == 3
-    off = world.graph(BackendOptions(min_consistent_share=0.0))
+    off = world.graph(replace(ONE_MATCH, min_consistent_share=0.0))
     for e in (*[world.true_match("a", "b", i) for i in (12, 20)], world.wrong_match("a", "b")):
         off.add_match(*e, INFO)
     assert off.optimize().groups == [["a", "b"]]
@@ -275,7 +291,7 @@ def test_twenty_percent_wrong_pcm_and_gnc() -> None:
     single wrong match PCM cannot check, which GNC rejects because a–b and a–c contradict it.
     Plain least squares on the same matches is corrupted."""
     world = World({"a": 0, "b": 10, "c": 20}, seed=5)
-    pg, plain = world.graph(), world.graph(BackendOptions(pcm=False, gnc=False))
+    pg, plain = world.graph(), world.graph(replace(ONE_MATCH, pcm=False, gnc=False))
     oracle = world.graph()
     true_ids, wrong_ids = [], []
     for b in ("b", "c"):
@@ -308,7 +324,7 @@ def test_incremental_updates_match_a_batch_solve_and_follow_the_reference() -> N
     """Robots b and c meet first (reference b); a joins later and becomes the reference.
     Each optimize warm-starts from the last; the end result equals a cold batch solve."""
     world = World({"a": 0, "b": 10, "c": 20}, seed=6)
-    pg = PoseGraph()
+    pg = PoseGraph(ONE_MATCH)
     batch = world.graph()
     matches = [world.true_match("b", "c", i) for i in range(0, N, 5)]
     matches += [world.true_match("a", "b", i) for i in range(3, N, 6)]
@@ -347,7 +363,7 @@ def test_replayed_demo_updates_end_where_a_batch_solve_does() -> None:
     warm-starts from the last; GNC started only there stayed in the wrong basin (it ended
     3.3 m / 156° off), hence the second solve from the current matches alone."""
     replay = json.loads((Path(__file__).parent / "data" / "backend_replay.json").read_text())
-    online, batch = PoseGraph(), PoseGraph()
+    online, batch = PoseGraph(ONE_MATCH), PoseGraph(ONE_MATCH)
     pending: list = []
     for event in replay["events"]:
         if event[0] == "s":
@@ -371,7 +387,7 @@ def test_replayed_demo_updates_end_where_a_batch_solve_does() -> None:
 
 def test_unmatched_robots_stay_apart() -> None:
     world = World({"a": 0, "b": 10})
-    result = world.graph(BackendOptions()).optimize()
+    result = world.graph().optimize()
     assert result.rejected == {}
     assert result.groups == [["a"], ["b"]]
     assert result.reference["b"] == "b"
@@ -394,7 +410,7 @@ def test_loop_closure_within_one_robot_removes_drift() -> None:
 
 
 def test_bad_input_is_rejected() -> None:
-    pg = PoseGraph()
+    pg = PoseGraph(ONE_MATCH)
     pg.add_submap("a", 0, np.eye(4))
     with pytest.raises(InvalidInputError, match="already"):
         pg.add_submap("a", 0, np.eye(4))
@@ -420,7 +436,7 @@ def test_submaps_out_of_order_give_the_same_solution() -> None:
     world = World({"a": 0, "b": 10}, seed=8)
     matches = [world.true_match("a", "b", i) for i in (4, 12, 20)]
     in_order = world.graph()
-    late = PoseGraph()
+    late = PoseGraph(ONE_MATCH)
     for r, odo in world.odo.items():
         for i, T in enumerate(odo):
             if (r, i) != ("b", 5):

@@ -12,12 +12,12 @@ from gmmap.fleet.store import Store
 from gmmap.io.datasets.tum import TumRgbd
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.submap import build_submaps
-from gmmap.options import BuildOptions, PlaceOptions, RobotOptions
+from gmmap.options import BackendOptions, BuildOptions, RobotOptions
 
-# Two-frame submaps of the bundled slice: true matches score near 0.6, under the default C_thr.
+# The bundled slice's two-frame submaps give one or two matches per robot pair: let one join.
 CONFIG = Config(
     build=BuildOptions(frames_per_submap=2, n_components=60),
-    place=PlaceOptions(min_confidence=0.55),
+    backend=BackendOptions(min_matches=1),
 )
 
 
@@ -52,6 +52,7 @@ def test_robot_node_and_merge_give_the_same_matches_and_poses(tmp_path, recorded
     config = Config(
         build=CONFIG.build,
         place=CONFIG.place,
+        backend=CONFIG.backend,
         robot=RobotOptions(name="a", fleet="same", store=str(tmp_path / "a.db")),
     )
     node = RobotNode(config)

@@ -99,7 +99,16 @@ def test_eval_registration_command_prints_table_one(tmp_path):
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out["pairs"] == 3
-    keys = {"t_error_mean", "t_rmse", "r_error_mean", "r_rmse", "success_rate", "time_per_pair_s"}
+    keys = {
+        "t_error_mean",
+        "t_error_median",
+        "t_rmse",
+        "r_error_mean",
+        "r_error_median",
+        "r_rmse",
+        "success_rate",
+        "time_per_pair_s",
+    }
     assert set(out["methods"]) == {"points", "gmm-merge", "per-frame", "gicp"}
     for m in out["methods"].values():
         assert keys == set(m) and 0.0 <= m["success_rate"] <= 1.0

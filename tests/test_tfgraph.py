@@ -105,7 +105,7 @@ def test_from_backend_result() -> None:
     # Three robots on a line, the true frames known; matches a–b (2) and b–c (1).
     rng = np.random.default_rng(0)
     frames = {"a": np.eye(4), "b": random_pose(rng), "c": random_pose(rng)}
-    pg = PoseGraph(BackendOptions())
+    pg = PoseGraph(BackendOptions(min_matches=1))
     step = np.eye(4)
     step[0, 3] = 1.0
     for r in frames:

@@ -86,14 +86,16 @@ class SelectOptions:
 class RegisterOptions:
     """GMM-to-GMM registration (`gmmap.math.register`).
 
-    Ladders are standard deviations (m) added to every covariance, coarse to fine: a guess needs
-    only a short one; a global search starts wide, where the yaw starts are compared.
+    Ladders are standard deviations (m) added to every covariance, coarse to fine. From a guess
+    the ladder starts at 20 cm: a guess 10-20° off (a fast-turning camera, a rough yaw) ends
+    within GICP's error from there (`gmmap eval registration --guess-error 10-20`), and from
+    5 cm it does not always. A global search starts wider, where the yaw starts are compared.
     ``information_scale`` None: the smaller component count (each component one independent
     measurement). ``confidence_scale``: the widening under which C is measured, so that it
     reflects shared geometry rather than how sharply each side was fitted.
     """
 
-    local_scales: tuple[float, ...] = (0.05, 0.0)
+    local_scales: tuple[float, ...] = (0.2, 0.1, 0.05, 0.0)
     global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.0)
     max_iter: int = 10  # Levenberg-Marquardt iterations per scale
     yaw_starts: int = 12
@@ -133,10 +135,15 @@ class PlaceOptions:
 
     top_k: int = 5
     max_distance: float = 0.1
-    min_confidence: float = 0.75
+    min_confidence: float = 0.55
     # Reject when another basin scores this close to the best (alternative / confidence):
     # the geometry is ambiguous, e.g. a corridor seen end for end.
-    max_ambiguity: float = 0.85
+    max_ambiguity: float = 0.7
+    # Reject when another candidate of the same query, in the same robot's map but more than
+    # conflict_distance m or conflict_angle degrees away, scores this close (`place.distinct`).
+    max_conflict: float = 0.8
+    conflict_distance: float = 1.0
+    conflict_angle: float = 10.0
     skip_recent: int = 2
     resample_points: int = 4096  # as PointNetVLAD's input
     use_yaw_hint: bool = False  # the descriptor's yaw instead of the full yaw search
@@ -148,6 +155,8 @@ class PlaceOptions:
             raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2]")
         if not 0 < self.max_ambiguity <= 1:
             raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
+        if not (self.max_conflict > 0 and self.conflict_distance > 0 and self.conflict_angle > 0):
+            raise InvalidInputError("max_conflict, conflict_distance, conflict_angle must be > 0")
 
 
 @dataclass(frozen=True)
@@ -179,10 +188,17 @@ class BackendOptions:
     # pair, while random wrong matches sit at d² in the thousands; GNC judges what passes.
     pcm_probability: float = 0.999
     pcm_exact_budget: int = 5_000  # branch-and-bound nodes per robot pair
-    # Two robots' maps join only once this many of their matches are mutually consistent;
-    # fewer are held back ("pending") until more arrive. 1 trusts a single match, which PCM
-    # cannot test; 2 stops a lone aliased match (a corridor seen end for end) from joining.
-    min_matches: int = 1
+    # Two robots' maps join only once their mutually consistent matches hold min_matches
+    # matches, or min_strong_matches of confidence >= strong_confidence (a match given without
+    # a confidence counts as strong); fewer are held back ("pending") until more arrive. One
+    # match is never enough by default: PCM cannot test it, and a corridor seen end for end
+    # scores as high as a true match (simulated depth cameras: C up to 0.87 at 2-12 m off);
+    # two consecutive submaps of robots passing a symmetric corridor in opposite directions
+    # even agree on one such flip. Weak matches (C 0.55-0.75: two sessions' submaps of one
+    # desk, partly overlapping) need more agreement than strong ones.
+    min_matches: int = 4
+    min_strong_matches: int = 3
+    strong_confidence: float = 0.75
     # ... and only while the consistent set is at least this share of all the matches verified
     # between them: most verified matches disagreeing is ambiguous geometry (a floor that fills
     # every mixture, a symmetric object seen from the other side), not two matched places.
@@ -208,8 +224,12 @@ class BackendOptions:
         for name in ("translation_floor", "rotation_floor", "prior_sigma"):
             if getattr(self, name) <= 0:
                 raise InvalidInputError(f"BackendOptions.{name} must be > 0")
-        if int(self.min_matches) != self.min_matches or self.min_matches < 1:
-            raise InvalidInputError("BackendOptions.min_matches must be an integer >= 1")
+        for name in ("min_matches", "min_strong_matches"):
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise InvalidInputError(f"BackendOptions.{name} must be an integer >= 1")
+        if not 0 <= self.strong_confidence <= 1:
+            raise InvalidInputError("BackendOptions.strong_confidence must be in [0, 1]")
         if not 0 <= self.min_consistent_share <= 1:
             raise InvalidInputError("BackendOptions.min_consistent_share must be in [0, 1]")
         for name in ("pcm_probability", "gnc_probability"):

@@ -10,7 +10,8 @@ otherwise), then, from the outside:
 - ``precision`` / ``recall`` of the verified (accepted) matches: a match is correct when its
   two submaps are a positive (views overlapping at the truth, `gmmap.eval.place.positives`) and
   its transform is within 0.2 m and 3° of the truth; recall counts over every positive pair of
-  the sessions, found by place recognition or not;
+  the sessions, found by place recognition or not; ``kept_precision``: the same over the
+  matches the backend kept (those that shape the merged map);
 - ``gicp``: the points + GICP verification (small_gicp, the same yaw starts) on the same
   candidates: how many it registers correctly, and its recall at 100 % precision when its
   inlier fraction is the score;
@@ -58,6 +59,7 @@ def evaluate_sessions(
         "positives": int(pos.sum() // 2),
         "candidates": len(mapper.matches),
         **verification(mapper.matches, held, pos, index),
+        "kept_precision": kept_precision(mapper, held, pos, index),
         "merge": report,
     }
     if gicp:
@@ -88,6 +90,14 @@ def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index
         "recall": correct_accepted / n_positive if n_positive else None,
         "candidates_registered_right": sum(right),
     }
+
+
+def kept_precision(mapper, held: Mapping, pos: np.ndarray, index: Mapping) -> float | None:
+    """The share of the backend's kept matches that are correct (None when it kept none)."""
+    kept = [mapper.edge_matches[e] for e in (mapper.result.accepted if mapper.result else [])]
+    right = [_positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
+             for m in kept]  # fmt: skip
+    return sum(right) / len(right) if right else None
 
 
 def gicp_verification(

@@ -97,7 +97,7 @@ class BackendResult:
     ``poses``: optimised anchor poses, each in its group's reference frame (= the reference
     robot's map frame). ``to_reference[r]`` maps robot r's map frame into its reference's
     (identity for a reference robot; see `PoseGraph` for the estimator). ``rejected`` maps an
-    edge id to why: "pcm", "pending" (fewer than ``min_matches`` between its robots),
+    edge id to why: "pcm", "pending" (too few between its robots: ``min_matches``),
     "ambiguous" (the consistent set under ``min_consistent_share`` of their verified matches)
     or "gnc". ``edges`` maps every edge id to its (target, source) nodes.
     """
@@ -293,12 +293,18 @@ class PoseGraph:
         for (a, b), pair in by_robot_pair(candidates).items():
             if a == b:
                 continue
-            if len(pair) < o.min_matches:
+            if not self._enough(pair):
                 rejected.update({m.id: "pending" for m in pair})
             elif len(pair) < o.min_consistent_share * verified[(a, b)]:
                 rejected.update({m.id: "ambiguous" for m in pair})
         candidates = [m for m in candidates if m.id not in rejected]
         return candidates, rejected, exact
+
+    def _enough(self, pair: list[Match]) -> bool:
+        """Whether a robot pair's consistent matches may join their maps (``min_matches``)."""
+        o = self.options
+        strong = sum(m.confidence is None or m.confidence >= o.strong_confidence for m in pair)
+        return len(pair) >= o.min_matches or strong >= o.min_strong_matches
 
     def _pcm(self, pair: list[Match]) -> tuple[set[int], bool]:
         """Indices (into ``pair``) of the largest pairwise-consistent subset."""

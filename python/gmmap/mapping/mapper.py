@@ -27,7 +27,7 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
-from gmmap.mapping.place import Candidate, Match, PlaceDatabase
+from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
 
@@ -82,14 +82,20 @@ class Mapper:
         judged before is registered (once) and judged. Adds no edges (see `add_match`)."""
         matches = []
         for i, s in enumerate(submaps):
-            for c in self._candidates(s):
-                matches.append(self.db.verify(s.robot, s.seq, s.gmm, c))
+            judged = [self.db.verify(s.robot, s.seq, s.gmm, c) for c in self._candidates(s)]
+            with self._lock:
+                anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
+            matches.extend(distinct(judged, anchors, self.config.place))
             if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
                 accepted = sum(m.accepted for m in matches)
                 progress(f"place recognition: {i + 1}/{len(submaps)} submaps, {accepted} verified")
         with self._lock:
             self.matches.extend(matches)
         return matches
+
+    @staticmethod
+    def _keys(matches: Sequence[Match]) -> set[Node]:
+        return {(m.candidate.robot, m.candidate.seq) for m in matches}
 
     def _candidates(self, s: Submap) -> list[Candidate]:
         with self._lock:

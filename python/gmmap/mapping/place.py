@@ -21,13 +21,15 @@ polar height grids centred on the points' centroids.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
 
 from gmmap import _core
 from gmmap.errors import InvalidInputError
+from gmmap.math.geometry import pose_distance
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import as_points
 from gmmap.math.register import Registration, register
@@ -136,12 +138,45 @@ class Candidate:
 @dataclass(frozen=True)
 class Match:
     """A verified (or rejected) candidate: ``registration.transform`` maps the query submap's
-    anchor frame into the candidate's."""
+    anchor frame into the candidate's. ``conflict``: the best confidence, relative to this
+    one's, of another candidate of the same query in the same robot's map that puts the query
+    elsewhere (`distinct`)."""
 
     query: tuple[str, int]
     candidate: Candidate
     registration: Registration
     accepted: bool
+    conflict: float = 0.0
+
+
+def distinct(
+    matches: Sequence[Match], anchors: Mapping[tuple[str, int], np.ndarray], options: PlaceOptions
+) -> list[Match]:
+    """``matches`` (one query's, all its candidates) with each one's `Match.conflict`, accepted
+    only while that stays ≤ ``options.max_conflict``.
+
+    Two candidates in one robot's map that both take the query, at places more than
+    ``conflict_distance`` m or ``conflict_angle`` degrees apart, cannot both be right: the
+    query looks like two places of that map (a corridor like another). The query's anchor as
+    each candidate puts it, ``anchor(candidate) · T``, is compared in the candidate robot's
+    map; the other's confidence counts whether it was accepted or not.
+    """
+    placed = [
+        anchors[(m.candidate.robot, m.candidate.seq)] @ m.registration.transform for m in matches
+    ]
+    out = []
+    for i, m in enumerate(matches):
+        best = 0.0
+        for j, o in enumerate(matches):
+            if j == i or o.candidate.robot != m.candidate.robot:
+                continue
+            t, angle = pose_distance(placed[i], placed[j])
+            if t > options.conflict_distance or angle > options.conflict_angle:
+                best = max(best, o.registration.confidence)
+        conflict = best / m.registration.confidence if m.registration.confidence > 0 else 0.0
+        accepted = m.accepted and conflict <= options.max_conflict
+        out.append(replace(m, accepted=accepted, conflict=conflict))
+    return out
 
 
 @dataclass

@@ -95,6 +95,13 @@ def rotation_angle(R: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0))
 
 
+def pose_distance(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """How far apart two 4x4 poses are: translation (m) and rotation (degrees)."""
+    translation = float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
+    angle = float(rotation_angle(a[:3, :3].T @ b[:3, :3])[0])
+    return translation, math.degrees(angle)
+
+
 def rigid_matrix(T: np.ndarray, what: str) -> np.ndarray:
     """A finite 4x4 rigid transform, projected onto SE(3); InvalidInputError (naming ``what``)
     for anything else."""
