@@ -127,10 +127,12 @@ class PlaceOptions:
     query; a robot's ``skip_recent`` latest own submaps are not candidates (they overlap the
     query by construction).
 
-    C_thr 0.75: with five LiDAR robots in the simulated office, corridor views turned 180°
-    reach C 0.5-0.8 and outnumber the true matches above 0.55, none pass 0.75; on fr1_xyz
-    halves (20-frame submaps) the merged frame is 2.4 cm / 0.9° with it. Submaps of only a
-    few depth frames score lower (true matches of 2-frame submaps near 0.6): lower it there.
+    C_thr 0.55 with ``max_ambiguity`` 0.7: true cross-session matches of one desk (fr1_xyz
+    against itself re-sampled at 10 Hz) score C 0.58-0.91 with the best other basin at 0.3-0.4
+    of C, so C_thr 0.75 keeps a third of them. A match alone does not join two maps: in the
+    simulated office corridor views turned 180° score as high (C up to 0.87), which is why the
+    join needs several consistent matches (`BackendOptions.min_matches`) and why a query whose
+    candidates put it at two places of one map is rejected (``max_conflict``).
     """
 
     top_k: int = 5
