@@ -6,6 +6,8 @@ Prints one JSON object. Every run registers the same submap pairs with every met
 - TUM fr1_xyz, 5-frame submaps, from the identity (the paper's setting) — and the time per
   pair of Point-to-GMM registration against small_gicp's GICP on the same pairs;
 - TUM fr1_xyz in the global mode: random yaw (0–180°) and ≤ 1 m per pair, no initial guess;
+- TUM fr1_xyz 2-frame submaps and fr3 long office from a guess 10-20° off (the truth turned
+  about a random axis, moved ≤ 5 cm), every method from the same guess;
 - TUM fr3 long office household (the paper's sequence; only its first 16 depth frames ship);
 - TUM fr3 cabinet keyframes (also at 3 cm voxels within 3 m) and KITTI 00/08 scans, one frame
   per submap: these frames are far apart, so every method starts from odometry with simulated
@@ -75,6 +77,25 @@ def main() -> None:
             max_pairs=60,
             methods=("points", "gmm-merge", "gicp"),
         ),
+        "tum_fr1_xyz_guess_10_20": run(
+            "fr1_xyz, 2-frame submaps from a guess 10-20° off",
+            "tum_fr1_xyz",
+            quick,
+            loader={"stride": 2},
+            frames_per_submap=2,
+            max_pairs=60,
+            guess_deg=(10.0, 20.0),
+            methods=("points", "gicp"),
+        ),
+        "tum_fr3_long_office_guess_10_20": run(
+            "fr3 long office from a guess 10-20° off",
+            "tum_fr3_long_office_household",
+            quick,
+            loader={"stride": 2},
+            frames_per_submap=2,
+            guess_deg=(10.0, 20.0),
+            methods=("points", "gicp"),
+        ),
         "tum_fr3_long_office": run(
             "fr3 long office",
             "tum_fr3_long_office_household",
@@ -119,7 +140,7 @@ def main() -> None:
             scales=(0.1,),
             methods=("points", "gicp"),
         )
-    for key in ("tum_fr1_xyz", "kitti_00", "kitti_08"):
+    for key in ("tum_fr1_xyz", "tum_fr1_xyz_guess_10_20", "kitti_00", "kitti_08"):
         if "methods" in out[key]:
             m = out[key]["methods"]
             ratio = m["points"]["time_per_pair_s"] / m["gicp"]["time_per_pair_s"]
