@@ -82,3 +82,23 @@ def test_a_fast_rotation_pair_registers_from_the_identity_within_gicps_error(sha
     for key in ("t_error_mean", "t_error_median", "r_error_mean", "r_error_median"):
         assert gmm[key] <= gicp[key], (key, gmm[key], gicp[key])
     assert gmm["success_rate"] >= 0.95
+
+
+def test_a_query_that_fits_two_places_of_one_map_is_rejected() -> None:
+    """Two candidates in robot b's map both take the query, 5 m apart: neither is kept; a
+    third at the first one's place agrees with it and does not count against it."""
+    from gmmap.mapping.place import Match, distinct
+    from gmmap.math.register import Registration
+    from gmmap.options import PlaceOptions
+
+    def match(seq: int, confidence: float) -> Match:
+        reg = Registration(np.eye(4), confidence, np.eye(6), 1, 0.0)
+        return Match(("a", 0), Candidate("b", seq, 0.0), reg, True)
+
+    anchors = {("b", 0): np.eye(4), ("b", 1): pose(0, (5.0, 0, 0)), ("b", 2): np.eye(4)}
+    judged = distinct([match(0, 0.8), match(1, 0.75), match(2, 0.7)], anchors, PlaceOptions())
+    assert [m.accepted for m in judged] == [False, False, False]
+    assert judged[0].conflict == pytest.approx(0.75 / 0.8)
+    # Alone with its agreeing neighbour, the first is kept.
+    judged = distinct([match(0, 0.8), match(2, 0.7)], anchors, PlaceOptions())
+    assert [m.accepted for m in judged] == [True, True] and judged[0].conflict == 0.0

@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
+from gmmap.math.geometry import pose_distance
 from gmmap.math.register import register
 
 METHODS = ("points", "gmm-merge", "per-frame", "gicp")
@@ -54,9 +55,7 @@ class Pair:
 
 def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     """Translation error (m) and rotation error (degrees) of a 4x4 estimate."""
-    t = float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3]))
-    c = (np.trace(estimate[:3, :3].T @ truth[:3, :3]) - 1) / 2
-    return t, math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return pose_distance(estimate, truth)
 
 
 def error_summary(errors: Sequence[tuple[float, float]]) -> dict:
