@@ -80,7 +80,7 @@ def table_one(pairs: list[Pair], decoded: dict[int, Submap] | None) -> tuple[dic
             p = copy.copy(p)
             p.source = {METHOD: decoded[src.seq]}
             p.target = {METHOD: decoded[tgt.seq]}
-        estimate, elapsed = run_method(METHOD, p, False, 0.05, None)
+        estimate, elapsed, _ = run_method(METHOD, p, False, 0.05, None)
         errors.append(pose_errors(estimate, p.truth))
         times.append(elapsed)
     return summarise(errors, times), np.array(errors)

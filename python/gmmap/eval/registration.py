@@ -165,8 +165,9 @@ def build_pairs(
 
 def run_method(
     method: str, pair: Pair, global_mode: bool, voxel: float, scales: tuple[float, ...] | None
-) -> tuple[np.ndarray, float]:
-    """One registration: the estimate (perturbed source → target) and its time."""
+) -> tuple[np.ndarray, float, float | None]:
+    """One registration: the estimate (perturbed source → target), its time and its confidence
+    C (None for GICP)."""
     P = pair.perturbation
     if method == "gicp":
         import small_gicp
@@ -183,19 +184,25 @@ def run_method(
             max_correspondence_distance=5 * voxel,
             num_threads=os.cpu_count() or 1,
         )
-        return result.T_target_source, time.perf_counter() - start
+        return result.T_target_source, time.perf_counter() - start, None
     source = pair.source[method].gmm.transform(P)
     start = time.perf_counter()
     r = register(
         source, pair.target[method].gmm, None if global_mode else pair.guess, scales=scales
     )
-    return r.transform, time.perf_counter() - start
+    return r.transform, time.perf_counter() - start, r.confidence
 
 
-def summarise(errors: list[tuple[float, float]], times: list[float]) -> dict:
+def summarise(
+    errors: list[tuple[float, float]],
+    times: list[float],
+    confidences: Sequence[float | None] = (),
+) -> dict:
+    """Error and time figures; for GMM methods also the highest confidence C of a failed
+    pair (farther than 5 cm / 2° from the truth) and the lowest of a successful one."""
     e = np.array(errors)
     ok = (e[:, 0] <= SUCCESS_M) & (e[:, 1] <= SUCCESS_DEG)
-    return {
+    out = {
         "t_error_mean": float(e[:, 0].mean()),
         "t_error_median": float(np.median(e[:, 0])),
         "t_rmse": float(np.sqrt((e[:, 0] ** 2).mean())),
@@ -205,6 +212,11 @@ def summarise(errors: list[tuple[float, float]], times: list[float]) -> dict:
         "success_rate": float(ok.mean()),
         "time_per_pair_s": float(np.mean(times)),
     }
+    if confidences and all(c is not None for c in confidences):
+        c = np.array(confidences, dtype=float)
+        out["confidence_failed_max"] = float(c[~ok].max()) if (~ok).any() else None
+        out["confidence_succeeded_min"] = float(c[ok].min()) if ok.any() else None
+    return out
 
 
 def evaluate_registration(
@@ -255,10 +267,11 @@ def evaluate_registration(
     for method in methods:
         if progress:
             progress(f"registering {len(pairs)} pairs with {method}")
-        errors, times = [], []
+        errors, times, confidences = [], [], []
         for pair in pairs:
-            estimate, elapsed = run_method(method, pair, global_mode, options.voxel_size, scales)
+            estimate, elapsed, c = run_method(method, pair, global_mode, options.voxel_size, scales)
+            confidences.append(c)
             errors.append(pose_errors(estimate, pair.truth @ np.linalg.inv(pair.perturbation)))
             times.append(elapsed)
-        result["methods"][method] = summarise(errors, times)
+        result["methods"][method] = summarise(errors, times, confidences)
     return result
