@@ -10,11 +10,12 @@ import pytest
 from gmmap.eval.registration import evaluate_registration, pose_errors
 from gmmap.io.datasets import BUNDLED_TUM_SLICE
 from gmmap.io.datasets.tum import TumRgbd
-from gmmap.mapping.place import Candidate, PlaceDatabase
+from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
 from gmmap.mapping.submap import build_submaps
 from gmmap.math.em import fit_gmm
 from gmmap.math.gmm import Gmm
-from gmmap.options import BuildOptions
+from gmmap.math.register import Registration
+from gmmap.options import BuildOptions, PlaceOptions
 
 
 def plane(rng, origin, u, v, size_u, size_v, spacing=0.05) -> np.ndarray:
@@ -87,9 +88,6 @@ def test_a_fast_rotation_pair_registers_from_the_identity_within_gicps_error(sha
 def test_a_query_that_fits_two_places_of_one_map_is_rejected() -> None:
     """Two candidates in robot b's map both take the query, 5 m apart: neither is kept; a
     third at the first one's place agrees with it and does not count against it."""
-    from gmmap.mapping.place import Match, distinct
-    from gmmap.math.register import Registration
-    from gmmap.options import PlaceOptions
 
     def match(seq: int, confidence: float) -> Match:
         reg = Registration(np.eye(4), confidence, np.eye(6), 1, 0.0)

@@ -26,9 +26,11 @@ heuristic clique) is kept per robot pair. Then GNC (graduated non-convexity, tru
 squares; odometry and priors known inliers) in the optimisation.
 
 Limits: PCM needs two matches between the same robots; a single match can only be rejected by
-GNC, and only when other robots' matches contradict it (``min_matches=2`` holds it back
-instead). Wrong matches that are consistent with each other (perceptual aliasing along a
-corridor) can win the clique; nothing here detects that. Loop closures within one robot go
+GNC, and only when other robots' matches contradict it, which is why by default no robot pair
+joins on fewer than three consistent matches (``min_matches``, ``min_strong_matches``). Wrong
+matches that are consistent with each other (perceptual aliasing along a corridor: robots
+passing a symmetric one in opposite directions agree on the same 180° flip) can win the
+clique; nothing here detects that. Loop closures within one robot go
 through the same test with both odometry legs taken as independent, which they are not where
 they overlap (approximate there).
 
