@@ -25,11 +25,9 @@ prefix sums, so each pair costs O(1)). The largest set of pairwise-consistent ma
 heuristic clique) is kept per robot pair. Then GNC (graduated non-convexity, truncated least
 squares; odometry and priors known inliers) in the optimisation.
 
-Limits: PCM needs two matches between the same robots; a single match can only be rejected by
-GNC, and only when other robots' matches contradict it, which is why by default no robot pair
-joins on fewer than three consistent matches (``min_matches``, ``min_strong_matches``). Wrong
-matches that are consistent with each other (perceptual aliasing along a corridor: robots
-passing a symmetric one in opposite directions agree on the same 180° flip) can win the
+Limits: PCM needs two matches between the same robots (a single one only GNC can reject), so
+no robot pair joins on fewer than three (``min_matches``). Wrong matches consistent with each
+other (robots passing a symmetric corridor both ways agree on one 180° flip) can win the
 clique; nothing here detects that. Loop closures within one robot go
 through the same test with both odometry legs taken as independent, which they are not where
 they overlap (approximate there).
