@@ -34,6 +34,23 @@ def test_recovers_a_known_transform(scene):
     assert np.all(np.linalg.eigvalsh(r.information) > 0)
 
 
+def test_coarse_scales_on_merged_mixtures_end_where_the_whole_ones_do(scene):
+    """From a guess 15° off, the coarse scales may see the mixtures merged into fewer
+    components (moment matched: weight, mean and spread kept); the end point is the same."""
+    merged = scene.coarsened(0.4)
+    assert len(merged) < len(scene) and np.isclose(merged.weights.sum(), 1.0)
+    mean = scene.weights @ scene.means
+    np.testing.assert_allclose(merged.weights @ merged.means, mean, atol=1e-12)
+    truth = rigid(0.26, [0.03, -0.02, 0.01], roll=0.05)
+    source = scene.transform(np.linalg.inv(truth))
+    whole = register(source, scene, np.eye(4), coarse_cell=0.0)
+    fast = register(source, scene, np.eye(4))
+    np.testing.assert_allclose(fast.transform, whole.transform, atol=1e-5)
+    np.testing.assert_allclose(fast.transform, truth, atol=1e-4)
+    with pytest.raises(InvalidInputError):
+        scene.coarsened(0.0)
+
+
 def test_finds_the_pose_without_a_guess_and_in_4dof(scene):
     truth = rigid(2.3, [0.4, -0.3, 0.0])  # 132°: far from any local basin of the identity
     source = scene.transform(np.linalg.inv(truth))

@@ -98,6 +98,9 @@ class RegisterOptions:
     local_scales: tuple[float, ...] = (0.2, 0.1, 0.05, 0.0)
     global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.0)
     max_iter: int = 10  # Levenberg-Marquardt iterations per scale
+    # From a guess, scales >= 15 cm (but the last) see the mixtures merged in cells of this
+    # many times the scale (`gmmap.math.register`); 0: the whole mixtures at every scale.
+    coarse_cell: float = 2.0
     yaw_starts: int = 12
     dof: int = 6  # 4: x, y, z and yaw only (ground robots)
     information_scale: float | None = None
@@ -112,6 +115,8 @@ class RegisterOptions:
             ladder = getattr(self, name)
             if not ladder or not all(math.isfinite(s) and s >= 0 for s in ladder):
                 raise InvalidInputError(f"{name} must be finite values >= 0, got {ladder}")
+        if not (math.isfinite(self.coarse_cell) and self.coarse_cell >= 0):
+            raise InvalidInputError("coarse_cell must be finite and >= 0")
         if not (math.isfinite(self.confidence_scale) and self.confidence_scale >= 0):
             raise InvalidInputError("confidence_scale must be finite and >= 0")
         if self.max_iter < 1 or self.yaw_starts < 1 or not self.cutoff > 0 or not self.tol > 0:

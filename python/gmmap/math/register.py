@@ -4,7 +4,10 @@
 correlation C(T) = ∫ T(f) g / sqrt(∫f² ∫g²) of two mixtures, in the Rust core: analytic
 gradient (the rotation of the source covariances included), Levenberg-Marquardt steps on a
 Newton metric (Gauss-Newton plus the gradients' covariance term), coarse to fine by adding s²
-to every covariance for each s in ``scales``.
+to every covariance for each s in ``scales``. From a guess, the scales of 15 cm and more but
+the last run on the mixtures merged in cells of ``coarse_cell``·s (`Gmm.coarsened`): a third
+of the components, the same end point (fr1_xyz 2-frame submaps from a 10-20° guess: 5.3 →
+3.0 ms a pair, errors unchanged to 0.01 mm).
 C at the solution, measured with ``confidence_scale`` (5 cm) added to every covariance so it
 reflects the shared geometry rather than how sharply each side was fitted, is the geometric
 confidence (1: the mixtures coincide; nearly independent of the component counts). Without
@@ -24,6 +27,10 @@ from gmmap import _core
 from gmmap.errors import InvalidInputError
 from gmmap.math.gmm import Gmm, _rigid
 from gmmap.options import RegisterOptions
+
+# Scales from this standard deviation (m) up are registered on coarsened mixtures from a guess
+# (at 10 cm the merge saves less than it costs).
+COARSE_SCALE = 0.15
 
 
 @dataclass(frozen=True)
@@ -83,7 +90,34 @@ def register(
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
     scale = float(o.information_scale or min(len(source), len(target)))
     start = time.perf_counter()
-    T, confidence, info, iterations, alternative = _core.register_gmm(
+    iterations = 0
+    if init is not None and o.coarse_cell > 0:
+        # The coarse scales see the mixtures through a wide blur: merged in cells of that size
+        # they cost a fraction of the pairs and lead to the same basin.
+        while len(scales) > 1 and scales[0] >= COARSE_SCALE:
+            s0, scales = scales[0], scales[1:]
+            cell = o.coarse_cell * s0
+            coarse = (source.coarsened(cell), target.coarsened(cell))
+            init, _, _, it, _ = _run(*coarse, init, None, (s0,), o, scale)
+            iterations += it
+    T, confidence, info, it, alternative = _run(source, target, init, yaw_hint, scales, o, scale)
+    elapsed = time.perf_counter() - start
+    return Registration(
+        T, float(confidence), info, int(iterations + it), elapsed, float(alternative)
+    )
+
+
+def _run(
+    source: Gmm,
+    target: Gmm,
+    init: np.ndarray | None,
+    yaw_hint: float | None,
+    scales: tuple[float, ...],
+    o: RegisterOptions,
+    scale: float,
+) -> tuple:
+    """One call of the Rust core: (T, C, information, iterations, alternative C)."""
+    return _core.register_gmm(
         (source.weights, source.means, source.covariances),
         (target.weights, target.means, target.covariances),
         init,
@@ -97,8 +131,6 @@ def register(
         float(o.tol),
         float(o.cutoff),
     )
-    elapsed = time.perf_counter() - start
-    return Registration(T, float(confidence), info, int(iterations), elapsed, float(alternative))
 
 
 def confidence(
