@@ -67,7 +67,8 @@ def register(
     Args:
         init: a 4x4 initial guess (source → target); None searches over yaw.
         yaw_hint: with ``init`` None, start near this yaw (radians, e.g. from place recognition).
-        scales: standard deviations added to all covariances, coarse to fine; end with 0.
+        scales: standard deviations added to all covariances, coarse to fine, ending at 0
+            or near it.
             Default: ``options.local_scales`` with ``init``, ``options.global_scales`` without.
         options: the ``register`` section of the configuration (`RegisterOptions`);
             ``settings`` replace single fields of it (``dof=4``, ``max_iter=20``, …).
