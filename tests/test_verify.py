@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -97,6 +98,10 @@ def test_a_query_that_fits_two_places_of_one_map_is_rejected() -> None:
     judged = distinct([match(0, 0.8), match(1, 0.75), match(2, 0.7)], anchors, PlaceOptions())
     assert [m.accepted for m in judged] == [False, False, False]
     assert judged[0].conflict == pytest.approx(0.75 / 0.8)
+    # A competitor that failed verification itself does not count.
+    failed = replace(match(1, 0.75), accepted=False)
+    judged = distinct([match(0, 0.8), failed], anchors, PlaceOptions())
+    assert judged[0].accepted and judged[0].conflict == 0.0
     # Alone with its agreeing neighbour, the first is kept.
     judged = distinct([match(0, 0.8), match(2, 0.7)], anchors, PlaceOptions())
     assert [m.accepted for m in judged] == [True, True] and judged[0].conflict == 0.0

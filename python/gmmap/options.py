@@ -149,8 +149,9 @@ class PlaceOptions:
     # Reject when another basin scores this close to the best (alternative / confidence):
     # the geometry is ambiguous, e.g. a corridor seen end for end.
     max_ambiguity: float = 0.7
-    # Reject when another candidate of the same query, in the same robot's map but more than
-    # conflict_distance m or conflict_angle degrees away, scores this close (`place.distinct`).
+    # Reject when another verified candidate of the same query, in the same robot's map but
+    # more than conflict_distance m or conflict_angle degrees away, scores this close
+    # (`place.distinct`).
     max_conflict: float = 0.8
     conflict_distance: float = 1.0
     conflict_angle: float = 10.0

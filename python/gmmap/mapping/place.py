@@ -139,8 +139,8 @@ class Candidate:
 class Match:
     """A verified (or rejected) candidate: ``registration.transform`` maps the query submap's
     anchor frame into the candidate's. ``conflict``: the best confidence, relative to this
-    one's, of another candidate of the same query in the same robot's map that puts the query
-    elsewhere (`distinct`)."""
+    one's, of another verified candidate of the same query in the same robot's map that puts
+    the query elsewhere (`distinct`)."""
 
     query: tuple[str, int]
     candidate: Candidate
@@ -159,7 +159,9 @@ def distinct(
     ``conflict_distance`` m or ``conflict_angle`` degrees apart, cannot both be right: the
     query looks like two places of that map (a corridor like another). The query's anchor as
     each candidate puts it, ``anchor(candidate) · T``, is compared in the candidate robot's
-    map; the other's confidence counts whether it was accepted or not.
+    map. Only competitors that pass verification themselves count: with rejected ones too, a
+    robot that receives submaps one by one meets different weak competitors in each arrival
+    order, and two LiDAR robots of the demo that meet once joined in only half of the orders.
     """
     placed = [
         anchors[(m.candidate.robot, m.candidate.seq)] @ m.registration.transform for m in matches
@@ -168,7 +170,7 @@ def distinct(
     for i, m in enumerate(matches):
         best = 0.0
         for j, o in enumerate(matches):
-            if j == i or o.candidate.robot != m.candidate.robot:
+            if j == i or o.candidate.robot != m.candidate.robot or not o.accepted:
                 continue
             t, angle = pose_distance(placed[i], placed[j])
             if t > options.conflict_distance or angle > options.conflict_angle:
