@@ -6,8 +6,8 @@ gradient (the rotation of the source covariances included), Levenberg-Marquardt 
 Newton metric (Gauss-Newton plus the gradients' covariance term), coarse to fine by adding s²
 to every covariance for each s in ``scales``. From a guess, the scales of 15 cm and more but
 the last run on the mixtures merged in cells of ``coarse_cell``·s (`Gmm.coarsened`): a third
-of the components, the same end point (fr1_xyz 2-frame submaps from a 10-20° guess: 5.3 →
-3.0 ms a pair, errors unchanged to 0.01 mm).
+of the components, the same end point (fr1_xyz 2-frame submaps from a 10-20° guess: 3.0 ms
+a pair against 5.3 ms on the whole mixtures, the same errors to 0.01 mm).
 C at the solution, measured with ``confidence_scale`` (5 cm) added to every covariance so it
 reflects the shared geometry rather than how sharply each side was fitted, is the geometric
 confidence (1: the mixtures coincide; nearly independent of the component counts). Without
