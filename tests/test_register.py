@@ -161,3 +161,19 @@ def test_table_one_on_fr3_cabinet_beats_gicp_from_odometry(shared_data):
     assert r["pairs"] == 19
     assert gmm["t_error_mean"] < 0.06 and gmm["r_error_mean"] < 2.0
     assert gmm["t_rmse"] <= gicp["t_rmse"] and gmm["r_rmse"] <= gicp["r_rmse"]
+
+
+def test_guess_mode_rejects_bad_ranges_and_other_modes():
+    from click.testing import CliRunner
+
+    from gmmap.cli import main
+    from gmmap.io.datasets import BUNDLED_TUM_SLICE
+
+    base = ["eval", "registration", str(BUNDLED_TUM_SLICE), "--frames-per-submap", "2"]
+    for extra, message in (
+        (["--guess-error", "abc"], "LOW-HIGH"),
+        (["--guess-error", "20-10"], "LOW <= HIGH"),
+        (["--guess-error", "10-20", "--global"], "excludes the global mode"),
+    ):
+        r = CliRunner().invoke(main, [*base, *extra])
+        assert r.exit_code != 0 and message in r.output, (extra, r.output)

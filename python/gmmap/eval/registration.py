@@ -236,7 +236,12 @@ def evaluate_registration(
     ``scales`` overrides the registration's coarse-to-fine ladder (default: `register`'s, or
     ``ODOMETRY_SCALES`` from odometry);
     ``odometry_guess`` starts every method from the odometry's relative pose (open the data with
-    a ``Drift`` to make that guess realistic) instead of the identity."""
+    a ``Drift`` to make that guess realistic) instead of the identity; ``guess_deg`` is the guess
+    mode of the module docstring."""
+    if guess_deg is not None and (global_mode or odometry_guess):
+        raise InvalidInputError("the guess mode excludes the global mode and the odometry guess")
+    if guess_deg is not None and not 0 <= guess_deg[0] <= guess_deg[1] <= 180:
+        raise InvalidInputError(f"guess degrees must be 0 <= LOW <= HIGH <= 180, got {guess_deg}")
     options = options or BuildOptions(covariance="full")
     scales = scales or (ODOMETRY_SCALES if odometry_guess else None)
     frames = frames if max_pairs is None else frames[: (max_pairs + 1) * frames_per_submap]
