@@ -3,7 +3,7 @@
 Prints one JSON object: per sensor and robot count, over the seeds, the robot pairs whose maps
 joined, the joined pairs whose relative pose where they met is more than 0.5 m or 5° off the
 truth ("wrong"), and the matches verified and kept. A wrong merge is worse than none: the
-defaults must keep "wrong" at 0. Building the submaps dominates the time (about 40 minutes for
+defaults must keep "wrong" at 0. Building the submaps dominates the time (about 15 minutes for
 the default 10 seeds on 2 cores), so `make bench` leaves this one out.
 
     .venv/bin/python benchmarks/merge_sweep.py [--seeds 10] [--robots 3,5] [--sensors lidar,depth]
