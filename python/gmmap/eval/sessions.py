@@ -77,10 +77,14 @@ def _positive(m: Match, pos: np.ndarray, index: Mapping) -> bool:
     return bool(pos[index[m.query], index[(m.candidate.robot, m.candidate.seq)]])
 
 
+def _right(m: Match, held: Mapping, pos: np.ndarray, index: Mapping) -> bool:
+    """A positive pair registered within `is_correct`'s tolerance of the truth."""
+    return _positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
+
+
 def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping) -> dict:
     """Precision and recall of the accepted matches, and how many candidates registered right."""
-    right = [_positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
-             for m in matches]  # fmt: skip
+    right = [_right(m, held, pos, index) for m in matches]
     accepted = [m.accepted for m in matches]
     n_positive = int(pos.sum() // 2)
     correct_accepted = sum(r and a for r, a in zip(right, accepted, strict=True))
@@ -95,8 +99,7 @@ def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index
 def kept_precision(mapper, held: Mapping, pos: np.ndarray, index: Mapping) -> float | None:
     """The share of the backend's kept matches that are correct (None when it kept none)."""
     kept = [mapper.edge_matches[e] for e in (mapper.result.accepted if mapper.result else [])]
-    right = [_positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
-             for m in kept]  # fmt: skip
+    right = [_right(m, held, pos, index) for m in kept]
     return sum(right) / len(right) if right else None
 
 
