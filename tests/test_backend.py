@@ -266,6 +266,29 @@ def test_a_consistent_minority_of_the_verified_matches_does_not_join() -> None:
         BackendOptions(min_consistent_share=1.5)
 
 
+def test_a_third_robot_refuses_a_consistent_flip() -> None:
+    """Four matches agreeing on one wrong frame (a corridor seen end for end, a 180° turn) pass
+    PCM; a path through a third robot that met both, as confident as they are, refuses the
+    join; a weaker path does not."""
+    world = World({"a": 0, "b": 10, "c": 20}, seed=5, drift=LOW_DRIFT)
+    flip = np.eye(4)
+    flip[:3, :3] = so3_exp(np.array([[0.0, 0.0, np.pi]]))[0]
+    flip[:3, 3] = [3.0, 1.0, 0.0]
+    for path_confidence, joined in ((0.95, False), (0.7, True)):
+        pg = world.graph(BackendOptions())
+        A, B = world.odo["a"], world.odo["b"]
+        flipped = [
+            pg.add_match(("a", i), ("b", i + 2), invert(A[i]) @ flip @ B[i + 2], INFO, 0.85)
+            for i in (4, 6, 8, 10)
+        ]
+        pg.add_match(*world.true_match("a", "c", 14), INFO, path_confidence)
+        pg.add_match(*world.true_match("c", "b", 3), INFO, path_confidence)
+        result = pg.optimize()
+        assert (["a", "b"] in result.groups) == joined, path_confidence
+        if not joined:
+            assert {result.rejected[e] for e in flipped} == {"contradicted"}
+
+
 def test_wrong_matches_are_rejected_by_pcm() -> None:
     world = World({"a": 0, "b": 10}, seed=4)
     pg, oracle = world.graph(), world.graph()

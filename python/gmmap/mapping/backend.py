@@ -28,18 +28,17 @@ squares; odometry and priors known inliers) in the optimisation.
 Limits: PCM needs two matches between the same robots (a single one only GNC can reject), so
 no robot pair joins on fewer than three (``min_matches``). Wrong matches consistent with each
 other (robots passing a symmetric corridor both ways agree on one 180° flip) can win the
-clique; nothing here detects that. Loop closures within one robot go
+clique; only a third robot that met both can refuse them (`consistency.contradicted`), and
+with two robots nothing does. Loop closures within one robot go
 through the same test with both odometry legs taken as independent, which they are not where
 they overlap (approximate there).
 
 Incremental use: add submaps and matches as they arrive and call `optimize` again. The graph
 is re-solved in batch (GNC needs the whole graph; factors are built once), warm-started from
 the last estimate, and GNC's schedule only runs when last time's inlier set is no longer a
-fixed point (see `PoseGraph._solve`). benchmarks/backend.py, 8 robots to 1,000 submaps with
-20 % wrong matches (3 seeds): 0.08-0.10 s per update on average, 0.10-0.14 s at 1,000
-submaps, 1-2 s for the 6-8 updates in 125 where GNC runs. ISAM2 on the same stream without
-the wrong matches solves about 3 times faster than the warm batch solve (0.013 vs 0.040 s
-mean), but it cannot run GNC or drop a rejected factor cheaply, so it is not used.
+fixed point (see `gmmap.mapping.solver.solve`). ISAM2 solves an update faster
+(benchmarks/backend.py), but it cannot run GNC or drop a rejected factor cheaply, so it is
+not used.
 """
 
 from __future__ import annotations
@@ -58,6 +57,7 @@ from gmmap.mapping.consistency import (
     by_robot_pair,
     chi2_quantile,
     components,
+    contradicted,
     drift_prefix,
     max_clique,
     pairwise_mahalanobis,
@@ -98,8 +98,9 @@ class BackendResult:
     robot's map frame). ``to_reference[r]`` maps robot r's map frame into its reference's
     (identity for a reference robot; see `PoseGraph` for the estimator). ``rejected`` maps an
     edge id to why: "pcm", "pending" (too few between its robots: ``min_matches``),
-    "ambiguous" (the consistent set under ``min_consistent_share`` of their verified matches)
-    or "gnc". ``edges`` maps every edge id to its (target, source) nodes.
+    "ambiguous" (the consistent set under ``min_consistent_share`` of their verified matches),
+    "contradicted" (by a path through a third robot: ``path_distance``) or "gnc". ``edges``
+    maps every edge id to its (target, source) nodes.
     """
 
     poses: dict[Node, np.ndarray]
@@ -235,13 +236,16 @@ class PoseGraph:
         groups = components(self.robots, candidates)
         reference = {r: g[0] for g in groups for r in g}
         graph, initial, n_known = self._build(candidates, reference)
-        values, weights, solver = self._solve(graph, initial, n_known, candidates)
+        o, outliers = self.options, self._gnc_outliers
+        values, weights, solver, self._gnc_outliers = solve(
+            graph, initial, n_known, candidates, o, outliers
+        )
         if solver == "gnc":
             # The inlier set changed: last time's estimate may sit in a basin the new set
             # does not support. Solve again from today's matches alone; keep the better.
             cold = self._build(candidates, reference, fresh=True)
             warm_outliers = self._gnc_outliers
-            c_values, c_weights, _ = self._solve(*cold, candidates)
+            c_values, c_weights, _, self._gnc_outliers = solve(*cold, candidates, o, warm_outliers)
             if better(cold[0], c_values, c_weights, graph, values, weights, n_known):
                 graph, values, weights = cold[0], c_values, c_weights
             else:
@@ -290,13 +294,19 @@ class PoseGraph:
                 rejected.update({pair[k].id: "pcm" for k in set(range(len(pair))) - inliers})
             candidates = sorted(kept, key=lambda m: m.id)
         verified = {key: len(pair) for key, pair in by_robot_pair(list(self._matches)).items()}
-        for (a, b), pair in by_robot_pair(candidates).items():
+        consistent, joining = by_robot_pair(candidates), {}
+        for (a, b), pair in consistent.items():
             if a == b:
                 continue
             if not self._enough(pair):
                 rejected.update({m.id: "pending" for m in pair})
             elif len(pair) < o.min_consistent_share * verified[(a, b)]:
                 rejected.update({m.id: "ambiguous" for m in pair})
+            else:
+                joining[(a, b)] = pair
+        paths = (o.path_distance, o.path_angle_deg)
+        for key in contradicted(joining, consistent, self._anchors, *paths):
+            rejected.update({m.id: "contradicted" for m in joining[key]})
         candidates = [m for m in candidates if m.id not in rejected]
         return candidates, rejected, exact
 
@@ -439,21 +449,6 @@ class PoseGraph:
                 if known and self._reference[a] == self._reference[b]:
                     links[a].append((0, b, invert(self._frame[a]) @ self._frame[b]))
         return shortest_path_frames(robots, links, reference), local
-
-    def _solve(
-        self,
-        graph: gtsam.NonlinearFactorGraph,
-        initial: gtsam.Values,
-        n_known: int,
-        matches: list[Match],
-    ) -> tuple[gtsam.Values, np.ndarray, str]:
-        """Solves; returns the values, each match's weight (1 inlier, 0 outlier) and how:
-        "lm" (no robust stage), "verified" or "gnc" (`gmmap.mapping.solver.solve`, which says
-        when GNC runs). Keeps the match ids GNC rejected for the next update."""
-        values, weights, solver, self._gnc_outliers = solve(
-            graph, initial, n_known, matches, self.options, self._gnc_outliers
-        )
-        return values, weights, solver
 
     def _finish(
         self, values: gtsam.Values, accepted: list[Match], rejected: dict[int, str]

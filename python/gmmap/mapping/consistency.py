@@ -8,6 +8,7 @@ clique search, and the grouping of matches by robot pair and of robots into conn
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
@@ -15,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.math.geometry import adjoint, invert, invert_with_cov, se3_log
+from gmmap.math.geometry import adjoint, invert, invert_with_cov, pose_distance, se3_log
 
 if TYPE_CHECKING:
     from gmmap.mapping.backend import Match, Node
@@ -218,3 +219,50 @@ def drift_prefix(anchors: np.ndarray, sigmas: Callable[[np.ndarray], np.ndarray]
         Ad = adjoint(anchors[1:])
         S[1:] = np.cumsum(Ad @ (sig[:, :, None] ** 2 * Ad.transpose(0, 2, 1)), axis=0)
     return S
+
+
+def contradicted(
+    joining: Mapping[tuple[str, str], list[Match]],
+    consistent: Mapping[tuple[str, str], list[Match]],
+    anchors: Mapping[Node, np.ndarray],
+    distance: float,
+    angle_deg: float,
+) -> set[tuple[str, str]]:
+    """The robot pairs of ``joining`` that a path through a third robot contradicts.
+
+    ``consistent`` holds every pair's PCM inliers (joining or not). For a pair (a, b), a path
+    is a match a–x and a match x–b; it contradicts the pair when it puts b's submap on it more
+    than ``distance`` or ``angle_deg`` away from where the pair's most confident match does,
+    and its weaker match is at least as confident as the pair's median match. PCM sees one
+    robot pair at a time, so wrong matches that agree with each other (a corridor seen end for
+    end, four times in a row) pass it; the third robot that met both elsewhere does not agree.
+    Matches without a confidence take no part. One wrong but confident match on a path holds a
+    true join back: the safe way to fail.
+    """
+    links: dict[tuple[str, str], list[tuple[np.ndarray, float, Node]]] = {}
+    for pair in consistent.values():
+        for m in pair:
+            if m.confidence is None:
+                continue
+            F = anchors[m.target] @ m.transform @ invert(anchors[m.source])
+            c = m.confidence
+            links.setdefault((m.target[0], m.source[0]), []).append((F, c, m.source))
+            links.setdefault((m.source[0], m.target[0]), []).append((invert(F), c, m.target))
+    robots = {r for pair in consistent for r in pair}
+    out = set()
+    for (a, b), pair in joining.items():
+        if (a, b) not in links:
+            continue
+        F_ab, _, _ = max(links[(a, b)], key=lambda link: link[1])
+        median = float(np.median([m.confidence for m in pair if m.confidence is not None]))
+        for x in sorted(robots - {a, b}):
+            for (F_ax, c_ax, _), (F_xb, c_xb, node) in itertools.product(
+                links.get((a, x), []), links.get((x, b), [])
+            ):
+                if min(c_ax, c_xb) < median:
+                    continue
+                # Both estimates of where b's submap on the path sits in a's map.
+                moved, turned = pose_distance(F_ax @ F_xb @ anchors[node], F_ab @ anchors[node])
+                if moved > distance or turned > angle_deg:
+                    out.add((a, b))
+    return out
