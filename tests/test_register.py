@@ -41,6 +41,13 @@ def test_coarse_scales_on_merged_mixtures_end_where_the_whole_ones_do(scene):
     assert len(merged) < len(scene) and np.isclose(merged.weights.sum(), 1.0)
     mean = scene.weights @ scene.means
     np.testing.assert_allclose(merged.weights @ merged.means, mean, atol=1e-12)
+
+    def second_moment(g):
+        return np.einsum(
+            "k,kij->ij", g.weights, g.covariances + g.means[:, :, None] * g.means[:, None]
+        )
+
+    np.testing.assert_allclose(second_moment(merged), second_moment(scene), atol=1e-12)
     truth = rigid(0.26, [0.03, -0.02, 0.01], roll=0.05)
     source = scene.transform(np.linalg.inv(truth))
     whole = register(source, scene, np.eye(4), coarse_cell=0.0)

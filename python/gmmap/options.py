@@ -101,7 +101,7 @@ class RegisterOptions:
     local_scales: tuple[float, ...] = (0.2, 0.1, 0.05, 0.0)
     global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
     max_iter: int = 10  # Levenberg-Marquardt iterations per scale
-    # From a guess, scales >= 15 cm (but the last) see the mixtures merged in cells of this
+    # From a guess, scales >= 10 cm (but the last) see the mixtures merged in cells of this
     # many times the scale (`gmmap.math.register`); 0: the whole mixtures at every scale.
     coarse_cell: float = 2.0
     yaw_starts: int = 12

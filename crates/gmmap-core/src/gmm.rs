@@ -146,6 +146,63 @@ impl Gmm {
     }
 }
 
+impl Gmm {
+    /// Components whose means share a `cell`-sized voxel merged into one with the same
+    /// weight, mean and covariance (moment matching): the mixture as seen at that scale.
+    /// Cells come out in lexicographic order of their indices.
+    pub fn coarsened(&self, cell: f64) -> Result<Gmm, CoreError> {
+        if !(cell > 0.0 && cell.is_finite()) {
+            return Err(CoreError::InvalidArgument(format!(
+                "cell must be finite and > 0, got {cell}"
+            )));
+        }
+        let key = |m: &[f64; 3]| m.map(|v| (v / cell).floor() as i64);
+        let mut cells: std::collections::BTreeMap<[i64; 3], usize> = Default::default();
+        for m in &self.means {
+            let next = cells.len();
+            cells.entry(key(m)).or_insert(next);
+        }
+        // Renumber in key order, so that the result does not depend on the input order.
+        let order: Vec<usize> = cells.values().copied().collect();
+        let mut rank = vec![0; order.len()];
+        for (r, &first) in order.iter().enumerate() {
+            rank[first] = r;
+        }
+        let group: Vec<usize> = self.means.iter().map(|m| rank[cells[&key(m)]]).collect();
+        let n = cells.len();
+        let (mut w, mut wm) = (vec![0.0; n], vec![[0.0; 3]; n]);
+        for ((&g, &wi), m) in group.iter().zip(&self.weights).zip(&self.means) {
+            w[g] += wi;
+            for a in 0..3 {
+                wm[g][a] += wi * m[a];
+            }
+        }
+        let means: Vec<[f64; 3]> = wm
+            .iter()
+            .zip(&w)
+            .map(|(s, &wg)| s.map(|v| v / wg))
+            .collect();
+        let mut spread = vec![Sym3::default(); n];
+        for (i, &g) in group.iter().enumerate() {
+            let d = sub(&self.means[i], &means[g]);
+            let term = self.covariances[i]
+                .add(&Sym3::outer(d))
+                .scale(self.weights[i]);
+            spread[g] = spread[g].add(&term);
+        }
+        let covariances = spread
+            .iter()
+            .zip(&w)
+            .map(|(c, &wg)| c.scale(1.0 / wg))
+            .collect();
+        Ok(Gmm {
+            weights: w,
+            means,
+            covariances,
+        })
+    }
+}
+
 /// log Σₖ exp(log_termₖ(x)), stable for any spread of terms.
 pub(crate) fn log_sum_exp(comps: &[Prepared], x: &[f64; 3], terms: &mut [f64]) -> f64 {
     let mut max = f64::NEG_INFINITY;

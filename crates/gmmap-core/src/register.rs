@@ -45,6 +45,10 @@ pub struct RegisterOptions {
     /// Standard deviation added to every covariance when the confidence is measured, so that
     /// C reflects the shared geometry rather than how sharply each side was fitted.
     pub confidence_scale: f64,
+    /// From a guess, scales of at least `coarse_scale` (but the last) register the mixtures
+    /// coarsened in cells of `coarse_cell` times the scale; 0: never.
+    pub coarse_cell: f64,
+    pub coarse_scale: f64,
 }
 
 #[cfg(test)]
@@ -59,6 +63,8 @@ impl Default for RegisterOptions {
             cutoff: 4.0,
             information_scale: 1.0,
             confidence_scale: 0.05,
+            coarse_cell: 0.0,
+            coarse_scale: 0.15,
         }
     }
 }
@@ -477,9 +483,9 @@ fn symmetrise(h: &mut [[f64; 6]; 6]) {
 impl Problem<'_> {
     /// Down the coarse-to-fine ladder from `start`: the pose, the unwidened evaluation with
     /// derivatives (for the information) and the iterations.
-    fn refine(&self, start: Pose, opts: &RegisterOptions) -> (Pose, Eval, usize) {
+    fn refine(&self, start: Pose, scales: &[f64], opts: &RegisterOptions) -> (Pose, Eval, usize) {
         let (mut pose, mut last, mut iterations) = (start, None, 0);
-        for s in &opts.scales {
+        for s in scales {
             let (p, e, it) = self.optimise(pose, s * s, opts);
             pose = p;
             iterations += it;
@@ -585,9 +591,22 @@ pub fn register(
     let problem = Problem::new(source, target, opts.cutoff);
     let coarse = opts.scales[0] * opts.scales[0];
     let mut iterations = 0;
+    let mut scales = &opts.scales[..];
     // Coarse solutions, best first: with a guess just the guess.
     let starts: Vec<Pose> = match init {
-        Some(pose) => vec![pose],
+        Some(mut pose) => {
+            // A wide blur sees merged components as it sees their parts, at a fraction of
+            // the pairs, and leads to the same basin.
+            while opts.coarse_cell > 0.0 && scales.len() > 1 && scales[0] >= opts.coarse_scale {
+                let cell = opts.coarse_cell * scales[0];
+                let (f, g) = (source.coarsened(cell)?, target.coarsened(cell)?);
+                let (p, _, it) =
+                    Problem::new(&f, &g, opts.cutoff).optimise(pose, scales[0] * scales[0], opts);
+                (pose, scales) = (p, &scales[1..]);
+                iterations += it;
+            }
+            vec![pose]
+        }
         None => {
             let yaws: Vec<f64> = match yaw_hint {
                 Some(y) => vec![y, y - 0.5, y + 0.5],
@@ -611,7 +630,7 @@ pub fn register(
             std::iter::once(best).chain(runner).collect()
         }
     };
-    let (mut pose, mut fin, it) = problem.refine(starts[0], opts);
+    let (mut pose, mut fin, it) = problem.refine(starts[0], scales, opts);
     iterations += it;
     let c2 = opts.confidence_scale * opts.confidence_scale;
     // ∫f², ∫g² and ∫T(f)g, all widened by c2 and pruned alike (evaluate adds c2 to each side).
@@ -625,7 +644,7 @@ pub fn register(
     let mut confidence = confidence_at(&pose);
     let mut alternative = 0.0;
     if let Some(start) = starts.get(1) {
-        let (other, other_fin, it) = problem.refine(*start, opts);
+        let (other, other_fin, it) = problem.refine(*start, scales, opts);
         iterations += it;
         if distinct(&other, &pose) {
             alternative = confidence_at(&other);

@@ -246,6 +246,19 @@ fn l2_inner<'py>(
     in_pool(py, || f.l2_inner(&g)).map_err(value_error)
 }
 
+/// Components sharing a `cell`-sized voxel merged by moment matching.
+#[pyfunction]
+fn coarsen_gmm<'py>(
+    py: Python<'py>,
+    weights: PyReadonlyArray1<'py, f64>,
+    means: PyReadonlyArray2<'py, f64>,
+    covariances: PyReadonlyArray3<'py, f64>,
+    cell: f64,
+) -> PyResult<GmmArrays<'py>> {
+    let g = gmm_of(weights, means, covariances)?;
+    gmm_to_arrays(py, &g.coarsened(cell).map_err(value_error)?)
+}
+
 type RegisterOutput<'py> = (
     Bound<'py, PyArray2<f64>>,
     f64,
@@ -258,7 +271,7 @@ type RegisterOutput<'py> = (
 /// the best distinct solution's confidence).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale, tol, cutoff))]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale, tol, cutoff, coarse_cell, coarse_scale))]
 fn register_gmm<'py>(
     py: Python<'py>,
     source: (
@@ -281,6 +294,8 @@ fn register_gmm<'py>(
     confidence_scale: f64,
     tol: f64,
     cutoff: f64,
+    coarse_cell: f64,
+    coarse_scale: f64,
 ) -> PyResult<RegisterOutput<'py>> {
     let (f, g) = (
         gmm_of(source.0, source.1, source.2)?,
@@ -298,6 +313,8 @@ fn register_gmm<'py>(
         confidence_scale,
         tol,
         cutoff,
+        coarse_cell,
+        coarse_scale,
     };
     let r = in_pool(py, || register(&f, &g, init, yaw_hint, &opts)).map_err(value_error)?;
     let t = PyArray1::from_vec(py, r.transform.to_matrix().to_vec()).reshape([4, 4])?;
@@ -450,6 +467,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(select_components, m)?)?;
     m.add_function(wrap_pyfunction!(l2_inner, m)?)?;
     m.add_function(wrap_pyfunction!(register_gmm, m)?)?;
+    m.add_function(wrap_pyfunction!(coarsen_gmm, m)?)?;
     m.add_function(wrap_pyfunction!(pair_histogram, m)?)?;
     Ok(())
 }

@@ -129,20 +129,7 @@ class Gmm:
         weight, mean and covariance (moment matching): the mixture as seen at that scale."""
         if not cell > 0:
             raise InvalidInputError(f"cell must be > 0, got {cell}")
-        cells = np.floor(self.means / cell).astype(np.int64)
-        cells -= cells.min(axis=0)
-        span = cells.max(axis=0) + 1
-        _, group = np.unique((cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2],
-                             return_inverse=True)  # fmt: skip
-        n = int(group.max()) + 1
-        w = np.bincount(group, self.weights, n)
-        wm = self.weights[:, None] * self.means
-        mu = np.stack([np.bincount(group, wm[:, k], n) for k in range(3)], 1) / w[:, None]
-        d = self.means - mu[group]
-        spread = self.weights[:, None, None] * (self.covariances + d[:, :, None] * d[:, None, :])
-        flat = spread.reshape(-1, 9)
-        cov = np.stack([np.bincount(group, flat[:, k], n) for k in range(9)], 1).reshape(-1, 3, 3)
-        return Gmm(w, mu, cov / w[:, None, None])
+        return Gmm(*_core.coarsen_gmm(self.weights, self.means, self.covariances, float(cell)))
 
     def l2_inner(self, other: Gmm) -> float:
         """∫ f g dx with the other mixture, in closed form."""

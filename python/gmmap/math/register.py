@@ -4,10 +4,10 @@
 correlation C(T) = ∫ T(f) g / sqrt(∫f² ∫g²) of two mixtures, in the Rust core: analytic
 gradient (the rotation of the source covariances included), Levenberg-Marquardt steps on a
 Newton metric (Gauss-Newton plus the gradients' covariance term), coarse to fine by adding s²
-to every covariance for each s in ``scales``. From a guess, the scales of 15 cm and more but
-the last run on the mixtures merged in cells of ``coarse_cell``·s (`Gmm.coarsened`): a third
-of the components, the same end point (fr1_xyz 2-frame submaps from a 10-20° guess: 3.0 ms
-a pair against 5.3 ms on the whole mixtures, the same errors to 0.01 mm).
+to every covariance for each s in ``scales``. From a guess, the scales of 10 cm and more but
+the last run on the mixtures merged in cells of ``coarse_cell``·s (`Gmm.coarsened`): a
+fraction of the components and the same end point (benchmarks/registration.py,
+``tum_fr1_xyz_guess_10_20``: the same errors to 0.01 mm in under half the time).
 C at the solution, measured with ``confidence_scale`` (5 cm) added to every covariance so it
 reflects the shared geometry rather than how sharply each side was fitted, is the geometric
 confidence (1: the mixtures coincide; nearly independent of the component counts). Without
@@ -29,8 +29,8 @@ from gmmap.math.gmm import Gmm, _rigid
 from gmmap.options import RegisterOptions
 
 # Scales from this standard deviation (m) up are registered on coarsened mixtures from a guess
-# (at 10 cm the merge saves less than it costs).
-COARSE_SCALE = 0.15
+# (`RegisterOptions.coarse_cell`; at 5 cm the merge saves nothing more).
+COARSE_SCALE = 0.1
 
 
 @dataclass(frozen=True)
@@ -91,34 +91,7 @@ def register(
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
     scale = float(o.information_scale or min(len(source), len(target)))
     start = time.perf_counter()
-    iterations = 0
-    if init is not None and o.coarse_cell > 0:
-        # The coarse scales see the mixtures through a wide blur: merged in cells of that size
-        # they cost a fraction of the pairs and lead to the same basin.
-        while len(scales) > 1 and scales[0] >= COARSE_SCALE:
-            s0, scales = scales[0], scales[1:]
-            cell = o.coarse_cell * s0
-            coarse = (source.coarsened(cell), target.coarsened(cell))
-            init, _, _, it, _ = _run(*coarse, init, None, (s0,), o, scale)
-            iterations += it
-    T, confidence, info, it, alternative = _run(source, target, init, yaw_hint, scales, o, scale)
-    elapsed = time.perf_counter() - start
-    return Registration(
-        T, float(confidence), info, int(iterations + it), elapsed, float(alternative)
-    )
-
-
-def _run(
-    source: Gmm,
-    target: Gmm,
-    init: np.ndarray | None,
-    yaw_hint: float | None,
-    scales: tuple[float, ...],
-    o: RegisterOptions,
-    scale: float,
-) -> tuple:
-    """One call of the Rust core: (T, C, information, iterations, alternative C)."""
-    return _core.register_gmm(
+    T, confidence, info, iterations, alternative = _core.register_gmm(
         (source.weights, source.means, source.covariances),
         (target.weights, target.means, target.covariances),
         init,
@@ -131,7 +104,11 @@ def _run(
         float(o.confidence_scale),
         float(o.tol),
         float(o.cutoff),
+        float(o.coarse_cell),
+        COARSE_SCALE,
     )
+    elapsed = time.perf_counter() - start
+    return Registration(T, float(confidence), info, int(iterations), elapsed, float(alternative))
 
 
 def confidence(
