@@ -214,11 +214,11 @@ class BackendOptions:
     # between them: most verified matches disagreeing is ambiguous geometry (a floor that fills
     # every mixture, a symmetric object seen from the other side), not two matched places.
     min_consistent_share: float = 0.5
-    # ... and only while no path through a third robot, both of whose matches are at least as
-    # confident as their median match, puts them elsewhere: this far (m) or turned this much
-    # (degrees) at the path's submap (`gmmap.mapping.consistency.contradicted`). Odometry drift
-    # between the path's submaps must stay under these (simulated LiDAR fleets: at most 0.5 m
-    # and 3.5° on true paths; a corridor seen end for end: 180°).
+    # ... and only while no path through a third robot, both of whose matches are strong and
+    # more confident than their median match, puts them elsewhere: this far (m) or turned
+    # this much (degrees) at the path's submap (`gmmap.mapping.consistency.contradicted`).
+    # Odometry drift between the path's submaps must stay under these (simulated LiDAR
+    # fleets: at most 0.5 m and 3.5° on true paths; a corridor seen end for end: 180°).
     path_distance: float = 2.0
     path_angle_deg: float = 15.0
     gnc: bool = True

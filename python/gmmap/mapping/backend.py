@@ -304,7 +304,7 @@ class PoseGraph:
                 rejected.update({m.id: "ambiguous" for m in pair})
             else:
                 joining[(a, b)] = pair
-        paths = (o.path_distance, o.path_angle_deg)
+        paths = (o.path_distance, o.path_angle_deg, o.strong_confidence)
         for key in contradicted(joining, consistent, self._anchors, *paths):
             rejected.update({m.id: "contradicted" for m in joining[key]})
         candidates = [m for m in candidates if m.id not in rejected]

@@ -227,13 +227,15 @@ def contradicted(
     anchors: Mapping[Node, np.ndarray],
     distance: float,
     angle_deg: float,
+    strong: float,
 ) -> set[tuple[str, str]]:
     """The robot pairs of ``joining`` that a path through a third robot contradicts.
 
     ``consistent`` holds every pair's PCM inliers (joining or not). For a pair (a, b), a path
     is a match a–x and a match x–b; it contradicts the pair when it puts b's submap on it more
     than ``distance`` or ``angle_deg`` away from where the pair's most confident match does,
-    and its weaker match is at least as confident as the pair's median match. PCM sees one
+    and its weaker match is strong (confidence >= ``strong``) and more confident than the
+    pair's median match: weak or equal evidence does not overrule agreement. PCM sees one
     robot pair at a time, so wrong matches that agree with each other (a corridor seen end for
     end, four times in a row) pass it; the third robot that met both elsewhere does not agree.
     Matches without a confidence take no part. One wrong but confident match on a path holds a
@@ -259,7 +261,8 @@ def contradicted(
             for (F_ax, c_ax, _), (F_xb, c_xb, node) in itertools.product(
                 links.get((a, x), []), links.get((x, b), [])
             ):
-                if min(c_ax, c_xb) < median:
+                weaker = min(c_ax, c_xb)
+                if weaker < strong or weaker <= median:
                     continue
                 # Both estimates of where b's submap on the path sits in a's map.
                 moved, turned = pose_distance(F_ax @ F_xb @ anchors[node], F_ab @ anchors[node])
