@@ -24,7 +24,8 @@ def test_the_cli_dump_is_the_defaults(tmp_path):
     assert result.exit_code == 0, result.output
     tree = yaml.safe_load(result.stdout)
     assert list(tree) == [
-        "build", "select", "register", "place", "backend", "transport", "robot", "planner", "sim",
+        "build", "select", "register", "place", "backend", "transport", "link", "robot",
+        "planner", "sim",
     ]  # fmt: skip
     assert Config.from_dict(tree) == Config()
 

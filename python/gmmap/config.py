@@ -1,6 +1,6 @@
 """The one configuration tree: YAML in, flags override it, the effective tree dumped beside results.
 
-    build, select, register, place, backend, transport, robot, planner, sim
+    build, select, register, place, backend, transport, link, robot, planner, sim
 
 Each section is a dataclass of `gmmap.options`, where each setting has its one default.
 ``gmmap config --dump`` prints the defaults; every command takes ``--config FILE`` (a partial
@@ -24,6 +24,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.options import (
     BackendOptions,
     BuildOptions,
+    LinkOptions,
     PlaceOptions,
     PlannerOptions,
     RegisterOptions,
@@ -48,6 +49,7 @@ class Config:
     place: PlaceOptions = field(default_factory=PlaceOptions)
     backend: BackendOptions = field(default_factory=BackendOptions)
     transport: TransportOptions = field(default_factory=TransportOptions)
+    link: LinkOptions = field(default_factory=LinkOptions)
     robot: RobotOptions = field(default_factory=RobotOptions)
     planner: PlannerOptions = field(default_factory=PlannerOptions)
     sim: SimOptions = field(default_factory=SimOptions)

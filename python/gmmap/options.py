@@ -411,6 +411,48 @@ class PlannerOptions:
 
 
 @dataclass(frozen=True)
+class LinkOptions:
+    """Emulated links between the demo's robots (`gmmap.fleet.links`).
+
+    With ``emulate`` (or any shaping set) each pair of robots talks through its own relay,
+    which counts every byte Zenoh puts on the link and, in both directions: caps it at
+    ``rate`` bytes/s (None: no cap), delays it by ``delay_s``, stalls a chunk for ``stall_s``
+    with probability ``loss`` (TCP's retransmission after a loss) and moves nothing during the
+    ``outages``, (start, end) seconds after the relays start.
+    """
+
+    emulate: bool = False
+    rate: float | None = None
+    delay_s: float = 0.0
+    loss: float = 0.0
+    stall_s: float = 0.2
+    outages: tuple[tuple[float, float], ...] = ()
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
+            raise InvalidInputError(f"link.rate must be > 0 bytes/s or null, got {self.rate}")
+        for name in ("delay_s", "stall_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InvalidInputError(f"link.{name} must be finite and >= 0, got {value}")
+        if not 0 <= self.loss < 1:
+            raise InvalidInputError(f"link.loss must be in [0, 1), got {self.loss}")
+        for window in self.outages:
+            if len(window) != 2 or not 0 <= window[0] < window[1]:
+                raise InvalidInputError(f"link.outages: (start, end), 0 <= start < end: {window}")
+
+    @property
+    def shaped(self) -> bool:
+        """Whether the robots talk through relays."""
+        return self.emulate or bool(self.rate or self.delay_s or self.loss or self.outages)
+
+    def outage_end(self, t: float) -> float | None:
+        """The end of the outage under way ``t`` seconds after the start, or None."""
+        return next((end for start, end in self.outages if start <= t < end), None)
+
+
+@dataclass(frozen=True)
 class SimOptions:
     """The simulator (`gmmap.io.sim`): which world, how many robots, which sensor, how they move.
 

@@ -51,9 +51,10 @@ def run_demo(
     fleet = f"demo{os.getpid()}"
     config.save(out)
     procs = []
+    relays = _start_relays(config, ports)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
-        own = _robot_config(config, i, names, ports, fleet, out)
+        own = _robot_config(config, i, names, ports, fleet, out, relays)
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--config", str(own.save(out / f"{name}.yaml")), "--sim", "--sim-index", str(i),
@@ -73,11 +74,15 @@ def run_demo(
     codes = [p.wait() for p in procs]
     for t in readers:
         t.join(timeout=5)
+    for relay in relays.values():
+        relay.close()
     if any(codes):
         raise RuntimeError(f"robot processes exited with {codes}; see the log above")
     reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
     truth = {n: json.loads((out / f"{n}.truth.json").read_text()) for n in names}
     report = summarise(reports, truth, sim)
+    if relays:
+        report.update(wire_report(relays, names, report["received"]))
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
     report["map_rrd"] = reports[names[0]].get("map_rrd")
@@ -86,10 +91,53 @@ def run_demo(
     return report
 
 
+def _start_relays(config: Config, ports: list[int]) -> dict:
+    """With emulated links, one relay per robot pair (i < j) in front of robot j's endpoint:
+    robot i reaches j only through it."""
+    from gmmap.fleet.links import Relay
+
+    if not config.link.shaped:
+        return {}
+    n = len(ports)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    return {(i, j): Relay(("127.0.0.1", ports[j]), config.link).start() for i, j in pairs}
+
+
+def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dict:
+    """What the relays carried: per robot the bytes it put on its links and took off them,
+    per link each direction, and the bytes per submap delivered to a peer."""
+    wire = {n: {"bytes": 0, "received_bytes": 0, "chunks": 0} for n in names}
+    links = []
+    for (i, j), relay in sorted(relays.items()):
+        c = relay.counts()
+        a, b = names[i], names[j]
+        for sender, receiver, d in ((a, b, c["forward"]), (b, a, c["backward"])):
+            wire[sender]["bytes"] += d.bytes
+            wire[sender]["chunks"] += d.chunks
+            wire[receiver]["received_bytes"] += d.bytes
+        links.append({"robots": [a, b], "bytes": [c["forward"].bytes, c["backward"].bytes]})
+    delivered = sum(received.values())
+    total = sum(w["bytes"] for w in wire.values())
+    return {
+        "wire": wire,
+        "links": links,
+        "wire_bytes_per_delivered_submap": total / delivered if delivered else None,
+    }
+
+
 def _robot_config(
-    config: Config, i: int, names: list[str], ports: list[int], fleet: str, out: Path
+    config: Config,
+    i: int,
+    names: list[str],
+    ports: list[int],
+    fleet: str,
+    out: Path,
+    relays: dict | None = None,
 ) -> Config:
-    """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints."""
+    """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints (through
+    the ``relays`` where links are emulated)."""
+    from gmmap.fleet.links import ZENOH_NO_GOSSIP
+
     name = names[i]
     robot = replace(
         config.robot,
@@ -98,8 +146,14 @@ def _robot_config(
         store=str(out / f"{name}.sqlite"),
         wait_for=tuple(n for n in names if n != name),
     )
-    peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
-    transport = replace(config.transport, port=ports[i], connect=peers)
+    if relays:
+        # Gossip off: peers would tell each other their own endpoints and meet around a relay.
+        peers = tuple(relays[(i, j)].endpoint for j in range(i + 1, len(ports)))
+        zenoh = {**config.transport.zenoh_options, **ZENOH_NO_GOSSIP}
+        transport = replace(config.transport, port=ports[i], connect=peers, zenoh_options=zenoh)
+    else:
+        peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+        transport = replace(config.transport, port=ports[i], connect=peers)
     return replace(config, robot=robot, transport=transport)
 
 
@@ -170,11 +224,22 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
+        "lost": lost(reports),
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
         # every robot's kept registrations, and the view's as optimised there
         "match_errors": match_errors(_registered(reports), kept, poses, truth_anchors),
+    }
+
+
+def lost(reports: dict[str, dict]) -> dict[str, int]:
+    """Per robot, its submaps that some peer never received (every demo robot is in reach
+    of every other), counted once per peer."""
+    built = {n: r["submaps_built"] for n, r in reports.items()}
+    return {
+        n: sum(max(0, built[n] - r["held"].get(n, 0)) for p, r in reports.items() if p != n)
+        for n in sorted(reports)
     }
 
 
@@ -233,6 +298,11 @@ def format_report(r: dict) -> str:
         )
     for i, line in enumerate(describe_match_errors(r.get("match_errors", {}))):
         lines.append(f"{'where they met' if i == 0 else '':<16}{line}")
+    if r.get("wire"):
+        sent = ", ".join(f"{n} {w['bytes']} B" for n, w in r["wire"].items())
+        per = r["wire_bytes_per_delivered_submap"]
+        per_text = f"{per:.0f} B on the wire per delivered submap" if per else "none delivered"
+        lines.append(f"wire            {sent}; {per_text}")
     lines.append(f"map             {r.get('map_png')}")
     if r.get("map_rrd"):
         lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")
@@ -245,6 +315,12 @@ def format_report(r: dict) -> str:
 @sim_settings
 @MIN_MATCHES
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
+@setting(
+    "--emulate-links", "link.emulate", "Robot pairs talk through counting relays.", is_flag=True
+)
+@setting("--link-rate", "link.rate", "Emulated links' cap, bytes/s each way.", type=float)
+@setting("--link-delay", "link.delay_s", "Emulated links' one-way delay (s).", type=float)
+@setting("--link-loss", "link.loss", "Emulated links' loss (a TCP stall) per chunk.", type=float)
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
 @click.option(
     "--out",

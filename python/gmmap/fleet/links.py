@@ -1,0 +1,193 @@
+"""Emulated links for tests and benchmarks: a TCP relay in front of a Zenoh endpoint that caps
+bandwidth, delays, stalls and cuts what crosses it, and counts every byte it carries.
+
+This machine's kernel has ``tc tbf`` but neither ``netem`` nor iptables, so delay, loss and
+partitions are done here, in the application. A robot connects to the relay's endpoint instead
+of its peer's; the relay forwards both directions. Over TCP a lost segment is never missing
+bytes, it is a retransmission stall, so ``loss`` holds a chunk back for ``stall_s`` with that
+probability. During an outage no byte moves either way; the connections stay open (as a radio
+out of range leaves them), and Zenoh's lease decides when a peer is gone.
+
+What the relay counts is all that Zenoh put on the socket: its framing, keep-alives, liveliness
+and queries included. TCP/IP headers it cannot see (``Relay.counts`` reports the chunks it
+read, not packets).
+
+Peers in Zenoh's peer mode tell each other where they listen (gossip) and would connect
+directly, around the relay; a fleet behind relays turns gossip off
+(``ZENOH_NO_GOSSIP``, for `TransportOptions.zenoh_options`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from types import TracebackType
+
+from gmmap.options import LinkOptions
+
+ZENOH_NO_GOSSIP = {"scouting/gossip/enabled": False}
+CHUNK = 4096  # bytes read at once
+BUFFER = 8  # chunks in flight per direction before the relay stops reading (back-pressure)
+
+
+@dataclass
+class LinkCount:
+    """What crossed one direction of a relay: bytes and the chunks they came in."""
+
+    bytes: int = 0
+    chunks: int = 0
+    stalls: int = 0
+
+
+@dataclass
+class _Direction:
+    count: LinkCount = field(default_factory=LinkCount)
+    free_at: float = 0.0  # when the rate cap lets the next byte go (monotonic)
+
+
+class Relay:
+    """A shaping, counting TCP relay from ``127.0.0.1:port`` to ``target`` (host, port).
+
+    Use as a context manager, or `start` and `close`. ``endpoint`` is the Zenoh endpoint to
+    connect to. One event loop thread serves every connection; "forward" is what the
+    connecting side sent, "backward" what it received.
+    """
+
+    def __init__(self, target: tuple[str, int], shape: LinkOptions | None = None, port: int = 0):
+        self.target = target
+        self.shape = shape or LinkOptions()
+        self._port = port
+        self._rng = random.Random(self.shape.seed)
+        self._dirs = {"forward": _Direction(), "backward": _Direction()}
+        self._lock = threading.Lock()
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True)
+        self._server: asyncio.base_events.Server | None = None
+        self._tasks: set[asyncio.Task] = set()
+        self._t0 = time.monotonic()
+
+    @property
+    def port(self) -> int:
+        return self._port
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/127.0.0.1:{self._port}"
+
+    def start(self) -> Relay:
+        self._thread.start()
+        future = asyncio.run_coroutine_threadsafe(self._serve(), self._loop)
+        future.result(timeout=5)
+        return self
+
+    def counts(self) -> dict[str, LinkCount]:
+        with self._lock:
+            return {k: LinkCount(**vars(d.count)) for k, d in self._dirs.items()}
+
+    def close(self) -> None:
+        if not self._thread.is_alive():
+            return
+        asyncio.run_coroutine_threadsafe(self._shutdown(), self._loop).result(timeout=5)
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(timeout=5)
+        self._loop.close()
+
+    def __enter__(self) -> Relay:
+        return self.start()
+
+    def __exit__(
+        self, kind: type[BaseException] | None, err: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # --------------------------------------------------------------------- event loop side
+    async def _serve(self) -> None:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(("127.0.0.1", self._port))
+        self._port = sock.getsockname()[1]
+        self._server = await asyncio.start_server(self._accept, sock=sock)
+        self._t0 = time.monotonic()
+
+    async def _shutdown(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+
+    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            up_reader, up_writer = await asyncio.open_connection(*self.target)
+        except OSError:
+            writer.close()
+            return
+        pumps = [
+            asyncio.ensure_future(self._pump(reader, up_writer, "forward")),
+            asyncio.ensure_future(self._pump(up_reader, writer, "backward")),
+        ]
+        self._tasks.update(pumps)
+        with contextlib.suppress(asyncio.CancelledError):
+            # One side closing closes the other, as a TCP link would.
+            await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
+        for task in pumps:
+            task.cancel()
+            self._tasks.discard(task)
+        for w in (writer, up_writer):
+            w.close()
+
+    async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, name: str):
+        """Reads chunks and releases each when the rate cap, the delay, a stall and any outage
+        allow; a bounded queue between them gives back-pressure."""
+        queue: asyncio.Queue = asyncio.Queue(BUFFER)
+        sender = asyncio.ensure_future(self._send(queue, writer, name))
+        try:
+            # Small reads under a low cap, so a chunk is not a burst of seconds.
+            size = (
+                CHUNK if self.shape.rate is None else int(min(CHUNK, max(64, self.shape.rate / 20)))
+            )
+            while chunk := await reader.read(size):
+                await queue.put((time.monotonic() + self.shape.delay_s, chunk))
+            await queue.put(None)
+            await sender
+        except (ConnectionError, asyncio.IncompleteReadError):
+            pass
+        finally:
+            sender.cancel()
+
+    async def _send(self, queue: asyncio.Queue, writer: asyncio.StreamWriter, name: str) -> None:
+        d = self._dirs[name]
+        while (item := await queue.get()) is not None:
+            due, chunk = item
+            stalled = self.shape.loss > 0 and self._rng.random() < self.shape.loss
+            if stalled:
+                due += self.shape.stall_s
+            if self.shape.rate is not None:
+                # The cap: a chunk leaves once the previous ones have had their time.
+                start = max(time.monotonic(), d.free_at)
+                d.free_at = start + len(chunk) / self.shape.rate
+                due = max(due, d.free_at)
+            await self._wait_until(due)
+            writer.write(chunk)
+            await writer.drain()
+            with self._lock:
+                d.count.bytes += len(chunk)
+                d.count.chunks += 1
+                d.count.stalls += stalled
+
+    async def _wait_until(self, due: float) -> None:
+        """Sleeps until ``due`` (monotonic) and then past any outage under way."""
+        while True:
+            now = time.monotonic()
+            if now < due:
+                await asyncio.sleep(due - now)
+                continue
+            end = self.shape.outage_end(now - self._t0)
+            if end is None:
+                return
+            await asyncio.sleep(self._t0 + end - now)
