@@ -246,8 +246,7 @@ def contradicted(
         for m in pair:
             if m.confidence is None:
                 continue
-            F = anchors[m.target] @ m.transform @ invert(anchors[m.source])
-            c = m.confidence
+            F, c = anchors[m.target] @ m.transform @ invert(anchors[m.source]), m.confidence
             links.setdefault((m.target[0], m.source[0]), []).append((F, c, m.source))
             links.setdefault((m.source[0], m.target[0]), []).append((invert(F), c, m.target))
     robots = {r for pair in consistent for r in pair}
