@@ -138,13 +138,14 @@ def test_zenoh_peers_talk_through_the_relay_and_it_sees_the_framing() -> None:
     assert counts["forward"].bytes > 0  # B's handshake and subscription
 
 
-def test_demo_through_emulated_links_counts_the_wire(tmp_path) -> None:
-    """Two robot processes talk only through a counting relay: every payload byte a robot
-    sent crossed it, with Zenoh's own traffic on top, and nothing was lost on a free link."""
+def test_robots_behind_500_bytes_per_second_deliver_everything_and_only_then_end(tmp_path):
+    """Two robot processes talk only through a relay capped at 500 B/s each way, slower than
+    they build submaps: each ends only once the other holds all it holds. Every payload byte
+    a robot sent crossed the relay, with Zenoh's own traffic on top."""
     out = subprocess.run(
         [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
          "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--emulate-links"],
+         "--link-rate", "500"],
         capture_output=True, text=True, timeout=180,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
@@ -154,4 +155,6 @@ def test_demo_through_emulated_links_counts_the_wire(tmp_path) -> None:
     for name, wire in r["wire"].items():
         assert wire["bytes"] > r["bytes_sent"][name] > 0
     assert r["lost"] == {"robot_0": 0, "robot_1": 0}
+    for name in ("robot_0", "robot_1"):
+        assert json.loads((tmp_path / f"{name}.json").read_text())["complete"]
     assert r["wire_bytes_per_delivered_submap"] > r["bytes_per_submap"]["wire"]

@@ -364,7 +364,9 @@ def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
 class RobotOptions:
     """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
     ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
-    ``linger``: seconds it keeps receiving, matching and optimising after its frames end."""
+    ``linger``: seconds it keeps receiving, matching and optimising after its frames end;
+    then it stays until the peers in reach hold what it holds and it holds what they hold, or
+    until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`)."""
 
     name: str = "robot"
     fleet: str = "gmmap"
@@ -372,14 +374,15 @@ class RobotOptions:
     wait_for: tuple[str, ...] = ()
     wait_timeout: float = 30.0
     linger: float = 5.0
+    deadline: float = 120.0
 
     def __post_init__(self) -> None:
         check_name("robot.name", self.name)
         check_name("robot.fleet", self.fleet)
         for peer in self.wait_for:
             check_name("robot.wait_for", peer)
-        if not (self.wait_timeout >= 0 and self.linger >= 0):
-            raise InvalidInputError("robot.wait_timeout and robot.linger must be >= 0")
+        if not (self.wait_timeout >= 0 and self.linger >= 0 and self.deadline >= 0):
+            raise InvalidInputError("robot.wait_timeout, linger and deadline must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -316,6 +316,12 @@ def format_report(r: dict) -> str:
 @MIN_MATCHES
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
 @setting(
+    "--deadline",
+    "robot.deadline",
+    "Latest end after the frames, peers complete or not.",
+    type=float,
+)
+@setting(
     "--emulate-links", "link.emulate", "Robot pairs talk through counting relays.", is_flag=True
 )
 @setting("--link-rate", "link.rate", "Emulated links' cap, bytes/s each way.", type=float)

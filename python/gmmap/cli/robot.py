@@ -46,6 +46,9 @@ from gmmap.config import Config
 @MIN_MATCHES
 @MIN_CONFIDENCE
 @setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
+@setting(
+    "--deadline", "robot.deadline", "Latest end after mapping, peers complete or not.", type=float
+)
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "--truth",

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.config import Config
-from gmmap.errors import DecodeError
+from gmmap.errors import DecodeError, TransportError
+from gmmap.fleet import holdings
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.store import Edge, Store
 from gmmap.fleet.transport import Transport, TransportConfig
@@ -54,6 +55,9 @@ __all__ = ["Arrived", "Built", "RobotNode"]
 log = logging.getLogger(__name__)
 
 KIND = "submap"
+ADVERT_EVERY_S = 1.0  # while lingering, what we hold goes to the peers this often
+FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
+PROGRESS_EVERY_S = 5.0
 META_FRAMES = "frames_consumed"
 
 
@@ -105,6 +109,8 @@ class RobotNode:
         self._threads: list[threading.Thread] = []
         self._busy = 0  # inbox items taken and not finished, and a running optimisation
         self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
+        self.holdings = holdings.Holdings()  # what the peers say they hold
+        self._adverts = 0
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.wire: dict[int, dict] = {}  # own seq → bytes
@@ -183,31 +189,59 @@ class RobotNode:
         """Ask the stages to stop taking work (safe from a signal handler); `stop` closes."""
         self._stopping.set()
 
-    def linger(self, seconds: float) -> None:
-        """Keep receiving, matching and optimising for ``seconds`` after the frames are done
-        (a catch-up fetch at the start and half-way), then wait for the queues to drain."""
+    def linger(
+        self, seconds: float, deadline: float | None = None, progress: Callable | None = None
+    ) -> bool:
+        """Keep receiving, matching and optimising for ``seconds`` after the frames, then until
+        the peers in reach hold what we hold and no more (their adverts) and we are idle, or
+        ``deadline`` s after the frames (None: ``robot.deadline``). Fetches at the start and
+        while a peer holds more (every ``FETCH_EVERY_S``). Whether it ended complete."""
         if self.stopping:
-            return
-        deadline = time.monotonic() + seconds
+            return False
+        start = time.monotonic()
+        end = start + max(seconds, self.config.robot.deadline if deadline is None else deadline)
         self._catch_up()
-        half = time.monotonic() + seconds / 2
-        caught = False
-        while not self.stopping and time.monotonic() < deadline:
-            if not caught and time.monotonic() >= half:
+        advert = fetch = said = start
+        complete = False
+        while not self.stopping and (now := time.monotonic()) < end:
+            mine = self._held()
+            lacking = self.holdings.lacking(mine, self.transport.peers())
+            if now >= advert:
+                self._advertise(mine)
+                advert = now + ADVERT_EVERY_S
+            if now >= start + seconds and not lacking and self._idle():
+                complete = True
+                break
+            if now >= fetch and any(v["we_lack"] > 0 for v in lacking.values()):
                 self._catch_up()
-                caught = True
+                fetch = now + FETCH_EVERY_S
+            if progress and lacking and now >= said + PROGRESS_EVERY_S:
+                progress(f"{self.robot}: waiting for {holdings.describe(lacking)}")
+                said = now
             time.sleep(0.05)
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
+        return complete
+
+    def _held(self) -> dict[str, int]:
+        return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
+
+    def _advertise(self, counts: dict[str, int]) -> None:
+        with contextlib.suppress(TransportError):  # closing, or the link is gone: try later
+            self.transport.publish(holdings.KIND, self._adverts, holdings.encode(counts))
+            self._adverts += 1
+
+    def _idle(self) -> bool:
+        with self._lock:
+            busy = self._busy
+        idle = self.inbox.empty() and self.fetch_queue.empty() and not self._changed.is_set()
+        return busy == 0 and idle
 
     def drain(self, timeout: float = 10.0) -> bool:
         """Wait until inbox, fetches and optimisation are idle (True) or ``timeout`` s pass."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and not self.stopping:
-            with self._lock:
-                busy = self._busy
-            idle = self.inbox.empty() and self.fetch_queue.empty() and not self._changed.is_set()
-            if busy == 0 and idle:
+            if self._idle():
                 return True
             time.sleep(0.02)
         return False
@@ -277,6 +311,8 @@ class RobotNode:
             with self._lock:
                 self._arrived.setdefault(robot, set()).add(seq)
             self._enqueue(Arrived("received", robot, seq, payload))
+        elif kind == holdings.KIND:
+            self.holdings.update(robot, payload)
 
     def _serve(self, robot: str, kind: str, since: int) -> list[tuple[int, bytes]]:
         """A fetch is answered by the submaps' owner while it is present, else by every robot

@@ -66,9 +66,10 @@ def run_robot(
         builder = node.start_frames(frames)
         while builder.is_alive() and not stopped.is_set():
             builder.join(0.1)
-        node.linger(config.robot.linger)
+        complete = node.linger(config.robot.linger, progress=say)
         report = node.report()
         report["interrupted"] = stopped.is_set()
+        report["complete"] = complete
         if on_finish is not None and not stopped.is_set():
             report.update(on_finish(node.mapper))
         if report_path is not None:
