@@ -7,17 +7,24 @@ from gmmap.fleet.holdings import MAX_BYTES, Holdings, decode, describe, encode
 
 def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
     counts = {"robot_1": 7, "robot_0": 9}
-    assert decode(encode(counts)) == counts
-    assert encode(counts) == b'{"robot_0":9,"robot_1":7}'
+    assert decode(encode(counts)) == (counts, False)
+    assert decode(encode(counts, final=True)) == (counts, True)
+    assert encode(counts) == b'{"held":{"robot_0":9,"robot_1":7},"final":false}'
+
+    def advert(held, final=False):
+        return json.dumps({"held": held, "final": final}).encode()
+
     for bad in (
         b"not json",
         b"\xff\xfe",
         b"[1, 2]",
-        b'{"robot_0": -1}',
-        b'{"robot_0": 1.5}',
-        b'{"robot_0": true}',
-        b'{"bad name!": 1}',
-        json.dumps({f"r{i}": 1 for i in range(2000)}).encode(),
+        json.dumps(counts).encode(),  # no envelope
+        advert(counts, final=1),
+        advert({"robot_0": -1}),
+        advert({"robot_0": 1.5}),
+        advert({"robot_0": True}),
+        advert({"bad name!": 1}),
+        advert({f"r{i}": 1 for i in range(2000)}),
         b" " * (MAX_BYTES + 1),
     ):
         assert decode(bad) is None, bad
@@ -26,16 +33,19 @@ def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
     assert h.lacking({"robot_0": 1}, ["robot_1"]) == {"robot_1": {"they_lack": -1, "we_lack": -1}}
 
 
-def test_lacking_names_the_peers_in_reach_that_differ() -> None:
+def test_lacking_names_the_peers_that_differ_present_or_gone_without_a_final_advert() -> None:
     h = Holdings()
     assert h.update("b", encode({"a": 3, "b": 5}))
     assert h.update("c", encode({"a": 5, "b": 5, "c": 2}))
     mine = {"a": 5, "b": 5}
-    assert h.lacking(mine, ["b", "c"]) == {
-        "b": {"they_lack": 2, "we_lack": 0},
-        "c": {"they_lack": 0, "we_lack": 2},
-    }
-    assert h.lacking(mine, []) == {}  # no one in reach: nothing to wait for
-    h.update("b", encode(mine))
-    assert h.lacking(mine, ["b"]) == {}
-    assert describe({"d": {"they_lack": -1, "we_lack": -1}}) == "d (no advert yet)"
+    both = {"b": {"they_lack": 2, "we_lack": 0}, "c": {"they_lack": 0, "we_lack": 2}}
+    assert h.lacking(mine, ["b", "c"]) == both
+    # c vanished without a final advert (a partition, a crash): still waited for.
+    assert h.lacking(mine, ["b"]) == both
+    h.update("b", encode(mine, final=True))
+    h.update("c", encode({"a": 5, "b": 5, "c": 2}, final=True))
+    assert h.lacking(mine, ["b"]) == {}  # b is even; c is done and gone
+    assert h.lacking(mine, ["c"]) == {"c": {"they_lack": 0, "we_lack": 2}}  # present still
+    h.meet("d")  # met, then gone before it said anything: waited for
+    assert h.lacking(mine, []) == {"d": {"they_lack": -1, "we_lack": -1}}
+    assert describe(h.lacking(mine, [])) == "d (no advert yet)"

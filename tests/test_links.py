@@ -158,3 +158,23 @@ def test_robots_behind_500_bytes_per_second_deliver_everything_and_only_then_end
     for name in ("robot_0", "robot_1"):
         assert json.loads((tmp_path / f"{name}.json").read_text())["complete"]
     assert r["wire_bytes_per_delivered_submap"] > r["bytes_per_submap"]["wire"]
+
+
+def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:
+    """The link is cut from 4 s to 16 s, long enough for Zenoh's lease to expire: each robot
+    sees the other leave without saying it is done, waits, and both end holding everything."""
+    config = tmp_path / "outage.yaml"
+    config.write_text("link:\n  outages: [[4, 16]]\n")
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
+         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
+         "--config", str(config)],
+        capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    assert "waiting for" in out.stderr
+    assert r["lost"] == {"robot_0": 0, "robot_1": 0}
+    assert r["received"]["robot_0"] > 0 and r["received"]["robot_1"] > 0
+    for name in ("robot_0", "robot_1"):
+        assert json.loads((tmp_path / f"{name}.json").read_text())["complete"]

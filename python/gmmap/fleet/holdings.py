@@ -2,9 +2,11 @@
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
 An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``; its payload is compact JSON,
-``{"robot_0": 9, "robot_1": 7}``: how many submaps of each robot the sender holds. Counts, not
-sets: a robot's submaps are numbered from 0 and a peer that holds as many holds the same ones
-unless a gap is still being filled, which the next advert shows. A malformed or oversized
+``{"held":{"robot_0":9,"robot_1":7},"final":false}``: how many submaps of each robot the
+sender holds. Counts, not sets: a robot's submaps are numbered from 0 and a peer that holds as
+many holds the same ones unless a gap is still being filled, which the next advert shows. A
+robot's last advert is ``final``: it is done. A peer that vanished without one (a partition, a
+crash) is still waited for, by its last advert, until the deadline. A malformed or oversized
 advert is ignored, never trusted.
 """
 
@@ -17,28 +19,35 @@ from collections.abc import Iterable, Mapping
 from gmmap.options import NAME_RE
 
 KIND = "have"
+ADVERT_EVERY_S = 1.0  # while a robot lingers, what it holds goes to its peers this often
+FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
+PROGRESS_EVERY_S = 5.0
 MAX_BYTES = 65_536
 MAX_ROBOTS = 1_024
 
 
-def encode(counts: Mapping[str, int]) -> bytes:
-    return json.dumps(dict(sorted(counts.items())), separators=(",", ":")).encode()
+def encode(counts: Mapping[str, int], final: bool = False) -> bytes:
+    advert = {"held": dict(sorted(counts.items())), "final": final}
+    return json.dumps(advert, separators=(",", ":")).encode()
 
 
-def decode(payload: bytes) -> dict[str, int] | None:
-    """The counts of an advert, or None when it is not one."""
+def decode(payload: bytes) -> tuple[dict[str, int], bool] | None:
+    """The counts and the final flag of an advert, or None when it is not one."""
     if len(payload) > MAX_BYTES:
         return None
     try:
-        counts = json.loads(payload)
+        advert = json.loads(payload)
     except (ValueError, UnicodeDecodeError):
         return None
-    if not isinstance(counts, dict) or len(counts) > MAX_ROBOTS:
+    if not isinstance(advert, dict) or set(advert) != {"held", "final"}:
+        return None
+    counts, final = advert["held"], advert["final"]
+    if not isinstance(counts, dict) or len(counts) > MAX_ROBOTS or type(final) is not bool:
         return None
     for name, n in counts.items():
         if not NAME_RE.fullmatch(name) or type(n) is not int or n < 0:
             return None
-    return counts
+    return counts, final
 
 
 class Holdings:
@@ -46,23 +55,32 @@ class Holdings:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._peers: dict[str, dict[str, int]] = {}
+        self._peers: dict[str, tuple[dict[str, int], bool]] = {}
+        self._met: set[str] = set()
+
+    def meet(self, peer: str) -> None:
+        """A peer joined: from now on it is waited for until it says it is done."""
+        with self._lock:
+            self._met.add(peer)
 
     def update(self, peer: str, payload: bytes) -> bool:
-        counts = decode(payload)
-        if counts is not None:
+        advert = decode(payload)
+        if advert is not None:
             with self._lock:
-                self._peers[peer] = counts
-        return counts is not None
+                self._peers[peer] = advert
+        return advert is not None
 
-    def lacking(self, mine: Mapping[str, int], peers: Iterable[str]) -> dict[str, dict[str, int]]:
-        """Per peer in reach that does not hold what we hold, or holds more: ``they_lack`` and
-        ``we_lack``, submaps summed over robots (-1 each while the peer has not told us)."""
+    def lacking(self, mine: Mapping[str, int], present: Iterable[str]) -> dict[str, dict[str, int]]:
+        """Per peer that does not hold what we hold, or holds more: ``they_lack`` and
+        ``we_lack``, submaps summed over robots (-1 each while a present peer has not told
+        us). The peers are those present and those met that left without a final advert."""
         with self._lock:
-            known = {p: self._peers.get(p) for p in peers}
+            adverts, met = dict(self._peers), set(self._met)
+        gone = {p for p in met | set(adverts) if not adverts.get(p, ({}, False))[1]}
+        known = {p: adverts[p][0] if p in adverts else None for p in {*present, *gone}}
         out = {}
-        for peer, theirs in known.items():
-            if theirs is None:
+        for peer, theirs in sorted(known.items()):
+            if theirs is None:  # present or met, and silent
                 out[peer] = {"they_lack": -1, "we_lack": -1}
                 continue
             they = sum(max(0, n - theirs.get(r, 0)) for r, n in mine.items())

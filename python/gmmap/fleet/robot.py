@@ -55,9 +55,6 @@ __all__ = ["Arrived", "Built", "RobotNode"]
 log = logging.getLogger(__name__)
 
 KIND = "submap"
-ADVERT_EVERY_S = 1.0  # while lingering, what we hold goes to the peers this often
-FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
-PROGRESS_EVERY_S = 5.0
 META_FRAMES = "frames_consumed"
 
 
@@ -154,6 +151,7 @@ class RobotNode:
         t.serve(self._serve, self.store.robots)
         t.subscribe(self._receive)
         t.on_join(self.fetch_queue.put)
+        t.on_join(self.holdings.meet)
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
         for name, target in (
@@ -195,7 +193,7 @@ class RobotNode:
         """Keep receiving, matching and optimising for ``seconds`` after the frames, then until
         the peers in reach hold what we hold and no more (their adverts) and we are idle, or
         ``deadline`` s after the frames (None: ``robot.deadline``). Fetches at the start and
-        while a peer holds more (every ``FETCH_EVERY_S``). Whether it ended complete."""
+        while a peer holds more (every ``holdings.FETCH_EVERY_S``). Whether it ended complete."""
         if self.stopping:
             return False
         start = time.monotonic()
@@ -208,27 +206,28 @@ class RobotNode:
             lacking = self.holdings.lacking(mine, self.transport.peers())
             if now >= advert:
                 self._advertise(mine)
-                advert = now + ADVERT_EVERY_S
+                advert = now + holdings.ADVERT_EVERY_S
             if now >= start + seconds and not lacking and self._idle():
                 complete = True
                 break
             if now >= fetch and any(v["we_lack"] > 0 for v in lacking.values()):
                 self._catch_up()
-                fetch = now + FETCH_EVERY_S
-            if progress and lacking and now >= said + PROGRESS_EVERY_S:
+                fetch = now + holdings.FETCH_EVERY_S
+            if progress and lacking and now >= said + holdings.PROGRESS_EVERY_S:
                 progress(f"{self.robot}: waiting for {holdings.describe(lacking)}")
                 said = now
             time.sleep(0.05)
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
+        self._advertise(self._held(), final=True)  # done: the peers need not wait for us
         return complete
 
     def _held(self) -> dict[str, int]:
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
-    def _advertise(self, counts: dict[str, int]) -> None:
+    def _advertise(self, counts: dict[str, int], final: bool = False) -> None:
         with contextlib.suppress(TransportError):  # closing, or the link is gone: try later
-            self.transport.publish(holdings.KIND, self._adverts, holdings.encode(counts))
+            self.transport.publish(holdings.KIND, self._adverts, holdings.encode(counts, final))
             self._adverts += 1
 
     def _idle(self) -> bool:
