@@ -174,11 +174,11 @@ class Relay:
                 due = max(due, d.free_at)
             await self._wait_until(due)
             writer.write(chunk)
-            await writer.drain()
-            with self._lock:
+            with self._lock:  # counted once on the socket, before a close can cancel the drain
                 d.count.bytes += len(chunk)
                 d.count.chunks += 1
                 d.count.stalls += stalled
+            await writer.drain()
 
     async def _wait_until(self, due: float) -> None:
         """Sleeps until ``due`` (monotonic) and then past any outage under way."""
