@@ -7,6 +7,9 @@ Key expressions (``<fleet>``, ``<robot>``, ``<kind>`` are names, ``<seq>`` a dec
     gmmap/<fleet>/<robot>/<kind>/*?since=N fetch query: everything of that robot and kind, seq ≥ N
     gmmap/<fleet>/*/<kind>/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
 
+Robots send two kinds: ``submap`` (an encoded submap) and ``have`` (an advert of what the
+sender holds, `gmmap.fleet.holdings`; never fetched).
+
 Every robot that called :meth:`Transport.serve` answers fetch queries from its provider (its
 store), for its own data and for other robots' data it holds, so a robot that was away can catch
 up from whoever is present. Replies use the message key expressions above.
