@@ -187,27 +187,27 @@ class RobotNode:
         """Ask the stages to stop taking work (safe from a signal handler); `stop` closes."""
         self._stopping.set()
 
-    def linger(
-        self, seconds: float, deadline: float | None = None, progress: Callable | None = None
-    ) -> bool:
-        """Keep receiving, matching and optimising for ``seconds`` after the frames, then until
-        the peers in reach hold what we hold and no more (their adverts) and we are idle, or
-        ``deadline`` s after the frames (None: ``robot.deadline``). Fetches at the start and
-        while a peer holds more (every ``holdings.FETCH_EVERY_S``). Whether it ended complete."""
+    def linger(self, seconds: float, progress: Callable | None = None) -> bool:
+        """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
+        no more (`gmmap.fleet.holdings`), or ``robot.deadline`` s; True if complete."""
         if self.stopping:
             return False
         start = time.monotonic()
-        end = start + max(seconds, self.config.robot.deadline if deadline is None else deadline)
+        end = start + max(seconds, self.config.robot.deadline)
         self._catch_up()
-        advert = fetch = said = start
+        told, changed, advert, fetch, said = None, start, start, start, start
         complete = False
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
             lacking = self.holdings.lacking(mine, self.transport.peers())
+            if mine != told:
+                told, changed, advert = mine, now, now  # told at once
             if now >= advert:
                 self._advertise(mine)
                 advert = now + holdings.ADVERT_EVERY_S
-            if now >= start + seconds and not lacking and self._idle():
+            # The final advert may not make it out before the session closes: the last one must.
+            settled = now >= changed + holdings.ADVERT_EVERY_S
+            if now >= start + seconds and settled and not lacking and self._idle():
                 complete = True
                 break
             if now >= fetch and any(v["we_lack"] > 0 for v in lacking.values()):
