@@ -157,18 +157,13 @@ impl Gmm {
             )));
         }
         let key = |m: &[f64; 3]| m.map(|v| (v / cell).floor() as i64);
-        let mut cells: std::collections::BTreeMap<[i64; 3], usize> = Default::default();
-        for m in &self.means {
-            let next = cells.len();
-            cells.entry(key(m)).or_insert(next);
+        // Cells numbered in key order, so that the result does not depend on the input order.
+        let mut cells: std::collections::BTreeMap<[i64; 3], usize> =
+            self.means.iter().map(|m| (key(m), 0)).collect();
+        for (k, index) in cells.values_mut().enumerate() {
+            *index = k;
         }
-        // Renumber in key order, so that the result does not depend on the input order.
-        let order: Vec<usize> = cells.values().copied().collect();
-        let mut rank = vec![0; order.len()];
-        for (r, &first) in order.iter().enumerate() {
-            rank[first] = r;
-        }
-        let group: Vec<usize> = self.means.iter().map(|m| rank[cells[&key(m)]]).collect();
+        let group: Vec<usize> = self.means.iter().map(|m| cells[&key(m)]).collect();
         let n = cells.len();
         let (mut w, mut wm) = (vec![0.0; n], vec![[0.0; 3]; n]);
         for ((&g, &wi), m) in group.iter().zip(&self.weights).zip(&self.means) {

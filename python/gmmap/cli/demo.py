@@ -146,14 +146,14 @@ def _robot_config(
         store=str(out / f"{name}.sqlite"),
         wait_for=tuple(n for n in names if n != name),
     )
+    zenoh = dict(config.transport.zenoh_options)
     if relays:
         # Gossip off: peers would tell each other their own endpoints and meet around a relay.
         peers = tuple(relays[(i, j)].endpoint for j in range(i + 1, len(ports)))
-        zenoh = {**config.transport.zenoh_options, **ZENOH_NO_GOSSIP}
-        transport = replace(config.transport, port=ports[i], connect=peers, zenoh_options=zenoh)
+        zenoh.update(ZENOH_NO_GOSSIP)
     else:
         peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
-        transport = replace(config.transport, port=ports[i], connect=peers)
+    transport = replace(config.transport, port=ports[i], connect=peers, zenoh_options=zenoh)
     return replace(config, robot=robot, transport=transport)
 
 
