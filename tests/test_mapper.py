@@ -82,3 +82,24 @@ def test_a_mapper_judges_each_pair_once(recorded):
     mapper.optimize()
     assert mapper.frames.groups() == [["a", "b"]]
     assert mapper.global_map("b").reference == "a"
+
+
+def test_a_local_map_holds_the_neighbours_in_the_candidates_frame(recorded):
+    from dataclasses import replace
+
+    from gmmap.mapping.mapper import local_map
+
+    _, submaps = recorded
+    a0, a1 = submaps["a"][:2]
+    moved = np.eye(4)
+    moved[:3, 3] = [1.0, -2.0, 0.5]
+    a1 = replace(a1, anchor=moved)
+    local = local_map([a0, a1], frame=a1.anchor)
+    assert len(local) == len(a0.gmm) + len(a1.gmm)
+    np.testing.assert_allclose(local.weights.sum(), 1.0)
+    # a1 sits at its own frame's origin; a0 is where its anchor is, seen from a1's.
+    np.testing.assert_allclose(local.means[len(a0.gmm) :], a1.gmm.means, atol=1e-12)
+    expected = a0.gmm.transform(np.linalg.inv(moved) @ a0.anchor).means
+    np.testing.assert_allclose(local.means[: len(a0.gmm)], expected, atol=1e-12)
+    share = a0.n_points / (a0.n_points + a1.n_points)
+    np.testing.assert_allclose(local.weights[: len(a0.gmm)].sum(), share, atol=1e-12)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -30,6 +31,8 @@ from gmmap.mapping.globalmap import GlobalMap, build_global_map
 from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
+from gmmap.math.gmm import Gmm
+from gmmap.math.register import register
 
 Node = tuple[str, int]
 Progress = Callable[[str], None]
@@ -85,13 +88,42 @@ class Mapper:
             judged = [self.db.verify(s.robot, s.seq, s.gmm, c) for c in self._candidates(s)]
             with self._lock:
                 anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
-            matches.extend(distinct(judged, anchors, self.config.place))
+            judged = distinct(judged, anchors, self.config.place)
+            matches.extend(self._refined(s, m) if m.accepted else m for m in judged)
             if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
                 accepted = sum(m.accepted for m in matches)
                 progress(f"place recognition: {i + 1}/{len(submaps)} submaps, {accepted} verified")
         with self._lock:
             self.matches.extend(matches)
         return matches
+
+    def _refined(self, query: Submap, m: Match) -> Match:
+        """``m`` with its pose refined against the candidate's local map, or rejected when
+        that moves it more than ``max_refine_shift`` (`PlaceOptions.refine_neighbours`); its
+        confidence stays the verification's."""
+        options = self.config.place
+        k = options.refine_neighbours
+        if k == 0:
+            return m
+        c = m.candidate
+        with self._lock:
+            near = [
+                s for (robot, seq), s in self.submaps.items()
+                if robot == c.robot and abs(seq - c.seq) <= k
+            ]  # fmt: skip
+            frame = self.submaps[(c.robot, c.seq)].anchor
+        local = local_map(near, frame)
+        r = register(query.gmm, local, m.registration.transform, options=self.config.register)
+        shift = np.linalg.norm(r.transform[:3, 3] - m.registration.transform[:3, 3])
+        if shift > options.max_refine_shift:
+            return replace(m, accepted=False)
+        refined = replace(
+            m.registration,
+            transform=r.transform,
+            information=r.information,
+            time_s=m.registration.time_s + r.time_s,
+        )
+        return replace(m, registration=refined)
 
     @staticmethod
     def _keys(matches: Sequence[Match]) -> set[Node]:
@@ -186,3 +218,17 @@ class Mapper:
             },
             "backend_time_s": b.time_s,
         }
+
+
+def local_map(submaps: Sequence[Submap], frame: np.ndarray) -> Gmm:
+    """One mixture of ``submaps`` in the anchor ``frame`` of their robot's map, each submap
+    weighted by its point count."""
+    inverse = np.linalg.inv(frame)
+    parts = [s.gmm.transform(inverse @ s.anchor) for s in submaps]
+    counts = [max(s.n_points, 1) for s in submaps]
+    weights = np.concatenate([g.weights * n for g, n in zip(parts, counts, strict=True)])
+    return Gmm(
+        weights / weights.sum(),
+        np.concatenate([g.means for g in parts]),
+        np.concatenate([g.covariances for g in parts]),
+    )
