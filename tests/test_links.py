@@ -175,3 +175,26 @@ def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:
     assert "waiting for" in out.stderr
     assert r["lost"] == {"robot_0": 0, "robot_1": 0}
     assert r["received"]["robot_0"] > 0 and r["received"]["robot_1"] > 0
+
+
+def test_a_robot_reaches_another_only_through_a_third(tmp_path) -> None:
+    """Three robots in a chain (0 - 1 - 2, no link between 0 and 2): robot_1 hands each end's
+    submaps on to the other, and every robot ends holding everything."""
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "3",
+         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
+         "--link-topology", "chain", "--deadline", "60", "--max-frames", "120"],
+        capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    assert [link["robots"] for link in r["links"]] == [
+        ["robot_0", "robot_1"],
+        ["robot_1", "robot_2"],
+    ]
+    assert load_config(tmp_path / "robot_0.yaml").robot.wait_for == ("robot_1",)
+    reports = {n: json.loads((tmp_path / f"{n}.json").read_text()) for n in r["received"]}
+    for a, b in (("robot_0", "robot_2"), ("robot_2", "robot_0")):
+        built = reports[a]["submaps_built"]
+        assert built > 0 and reports[b]["held"].get(a) == built, (a, b)
+    assert r["lost"] == {"robot_0": 0, "robot_1": 0, "robot_2": 0}

@@ -310,7 +310,7 @@ def test_slow_provider_does_not_block_messages(pair):
     a.subscribe(inbox)
     assert wait_until(b.has_listeners)
     result = queue.Queue()
-    threading.Thread(target=lambda: result.put(b.fetch("b", timeout=WAIT)), daemon=True).start()
+    threading.Thread(target=lambda: result.put(b.fetch("z", timeout=WAIT)), daemon=True).start()
     assert started.wait(WAIT)
     b.publish("submap", 0, b"message")
     assert inbox.get() == ("b", "submap", 0, b"message")  # while the provider still waits

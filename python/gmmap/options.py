@@ -20,6 +20,7 @@ from gmmap.errors import InvalidInputError, TransportConfigError
 STRATEGIES = ("points", "gmm-merge", "per-frame")
 COVARIANCES = ("diag", "full")
 SENSORS = ("lidar", "depth")
+TOPOLOGIES = ("mesh", "chain")
 
 
 @dataclass(frozen=True)
@@ -442,7 +443,9 @@ class LinkOptions:
     which counts every byte Zenoh puts on the link and, in both directions: caps it at
     ``rate`` bytes/s (None: no cap), delays it by ``delay_s``, stalls a chunk for ``stall_s``
     with probability ``loss`` (TCP's retransmission after a loss) and moves nothing during the
-    ``outages``, (start, end) seconds after the relays start.
+    ``outages``, (start, end) seconds after the relays start. ``topology``: ``mesh``, a link
+    between every two robots, or ``chain``, robot i linked to i + 1 only, so that the others'
+    submaps reach a robot only through those in between.
     """
 
     emulate: bool = False
@@ -452,8 +455,11 @@ class LinkOptions:
     stall_s: float = 0.2
     outages: tuple[tuple[float, float], ...] = ()
     seed: int = 0
+    topology: str = "mesh"
 
     def __post_init__(self) -> None:
+        if self.topology not in TOPOLOGIES:
+            raise InvalidInputError(f"link.topology must be one of {TOPOLOGIES}")
         if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
             raise InvalidInputError(f"link.rate must be > 0 bytes/s or null, got {self.rate}")
         for name in ("delay_s", "stall_s"):
@@ -469,7 +475,14 @@ class LinkOptions:
     @property
     def shaped(self) -> bool:
         """Whether the robots talk through relays."""
-        return self.emulate or bool(self.rate or self.delay_s or self.loss or self.outages)
+        shaping = self.rate or self.delay_s or self.loss or self.outages
+        return self.emulate or bool(shaping) or self.topology != "mesh"
+
+    def pairs(self, n: int) -> list[tuple[int, int]]:
+        """The linked robot pairs (i < j) of ``n`` robots."""
+        if self.topology == "chain":
+            return [(i, i + 1) for i in range(n - 1)]
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
 
     def outage_end(self, t: float) -> float | None:
         """The end of the outage under way ``t`` seconds after the start, or None."""

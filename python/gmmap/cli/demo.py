@@ -26,7 +26,7 @@ import numpy as np
 
 from gmmap.cli.common import MIN_MATCHES, as_json_option, config_option, log, setting, sim_settings
 from gmmap.config import Config
-from gmmap.options import SimOptions, drift_overrides
+from gmmap.options import TOPOLOGIES, SimOptions, drift_overrides
 
 DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
 
@@ -92,14 +92,13 @@ def run_demo(
 
 
 def _start_relays(config: Config, ports: list[int]) -> dict:
-    """With emulated links, one relay per robot pair (i < j) in front of robot j's endpoint:
-    robot i reaches j only through it."""
+    """With emulated links, one relay per linked robot pair (i < j, `LinkOptions.pairs`) in
+    front of robot j's endpoint: robot i reaches j only through it."""
     from gmmap.fleet.links import Relay
 
     if not config.link.shaped:
         return {}
-    n = len(ports)
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    pairs = config.link.pairs(len(ports))
     return {(i, j): Relay(("127.0.0.1", ports[j]), config.link).start() for i, j in pairs}
 
 
@@ -139,17 +138,21 @@ def _robot_config(
     from gmmap.fleet.links import ZENOH_NO_GOSSIP
 
     name = names[i]
+    if relays:
+        linked = sorted({j for pair in relays if i in pair for j in pair} - {i})
+    else:
+        linked = [j for j in range(len(names)) if j != i]
     robot = replace(
         config.robot,
         name=name,
         fleet=fleet,
         store=str(out / f"{name}.sqlite"),
-        wait_for=tuple(n for n in names if n != name),
+        wait_for=tuple(names[j] for j in linked),
     )
     zenoh = dict(config.transport.zenoh_options)
     if relays:
         # Gossip off: peers would tell each other their own endpoints and meet around a relay.
-        peers = tuple(relays[(i, j)].endpoint for j in range(i + 1, len(ports)))
+        peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
         peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
@@ -235,7 +238,7 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
 
 def lost(reports: dict[str, dict]) -> dict[str, int]:
     """Per robot, its submaps that some peer never received (every demo robot is in reach
-    of every other), counted once per peer."""
+    of every other, directly or through the robots in between), counted once per peer."""
     built = {n: r["submaps_built"] for n, r in reports.items()}
     return {
         n: sum(max(0, built[n] - r["held"].get(n, 0)) for p, r in reports.items() if p != n)
@@ -327,6 +330,12 @@ def format_report(r: dict) -> str:
 @setting("--link-rate", "link.rate", "Emulated links' cap, bytes/s each way.", type=float)
 @setting("--link-delay", "link.delay_s", "Emulated links' one-way delay (s).", type=float)
 @setting("--link-loss", "link.loss", "Emulated links' loss (a TCP stall) per chunk.", type=float)
+@setting(
+    "--link-topology",
+    "link.topology",
+    "Which robots are linked: mesh (all pairs) or chain (i to i + 1; the rest multi-hop).",
+    type=click.Choice(TOPOLOGIES),
+)
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
 @click.option(
     "--out",

@@ -13,7 +13,8 @@ Stages, each a thread:
   the frames between robots for status and the report.
 - **fetch**: on a peer's join, for every robot it knows of, fetch what it misses (from the
   first gap, else from the latest seq + 1); it serves fetches from its store, so a robot that
-  was away catches up from whoever is present.
+  was away catches up from whoever is present, and the submaps of a robot out of its reach
+  come through the robots in between (`Transport.answers_for`).
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -148,7 +149,7 @@ class RobotNode:
 
     def start(self) -> None:
         t = self.transport
-        t.serve(self._serve, self.store.robots)
+        t.serve(self.store.fetch_provider, self.store.robots)
         t.subscribe(self._receive)
         t.on_join(self.fetch_queue.put)
         t.on_join(self.holdings.meet)
@@ -313,13 +314,6 @@ class RobotNode:
         elif kind == holdings.KIND:
             self.holdings.update(robot, payload)
 
-    def _serve(self, robot: str, kind: str, since: int) -> list[tuple[int, bytes]]:
-        """A fetch is answered by the submaps' owner while it is present, else by every robot
-        holding them: N robots answering every query would send each submap N - 1 times."""
-        if robot != self.robot and robot in self.transport.peers():
-            return []
-        return self.store.fetch_provider(robot, kind, since)
-
     def _fetcher(self) -> None:
         while not self.stopping:
             peers = {self.fetch_queue.get()}
@@ -352,7 +346,8 @@ class RobotNode:
                 have = stored | self._arrived.get(r, set())
             gaps = [seq for seq in range(max(have) + 1) if seq not in have] if have else []
             since = gaps[0] if gaps else (max(have) + 1 if have else 0)
-            for seq, payload in self.transport.fetch(r, KIND, since):
+            relay = r not in self.transport.peers()  # handed on by whoever holds them
+            for seq, payload in self.transport.fetch(r, KIND, since, relay=relay):
                 self._enqueue_fetched(r, seq, payload)
         # Robots no one present has named: those that left before we came.
         for r, held in self.transport.fetch_unknown(robots | {self.robot}, KIND).items():

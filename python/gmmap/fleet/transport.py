@@ -5,6 +5,7 @@ Key expressions (``<fleet>``, ``<robot>``, ``<kind>`` are names, ``<seq>`` a dec
     gmmap/<fleet>/<robot>/<kind>/<seq>     one message (a put); payload = the encoded bytes
     gmmap/<fleet>/<robot>                  liveliness token: the robot is present
     gmmap/<fleet>/<robot>/<kind>/*?since=N fetch query: everything of that robot and kind, seq ≥ N
+                                           (``;relay=1``: the asker cannot reach that robot)
     gmmap/<fleet>/*/<kind>/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
 
 Robots send two kinds: ``submap`` (an encoded submap) and ``have`` (an advert of what the
@@ -12,7 +13,10 @@ sender holds, `gmmap.fleet.holdings`; never fetched).
 
 Every robot that called :meth:`Transport.serve` answers fetch queries from its provider (its
 store), for its own data and for other robots' data it holds, so a robot that was away can catch
-up from whoever is present. Replies use the message key expressions above.
+up from whoever is present. Another robot's data it leaves to that robot while it sees it
+(`Transport.answers_for`), unless the asker says it cannot reach it: then robots in between
+hand it on, which is how submaps cross a fleet whose robots do not all meet (multi-hop).
+Replies use the message key expressions above.
 
 Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each direction,
 
@@ -359,7 +363,8 @@ class Transport:
             _, robot, kind, since = request
             with self._lock:
                 provider, roster = self._provider, self._roster
-            if provider is None or self._closed:
+            relayed = query.parameters.get("relay") == "1"
+            if provider is None or self._closed or not self.answers_for(robot, relayed):
                 return
             self._counters.bump("queries_served")
             try:
@@ -387,14 +392,22 @@ class Transport:
             except Exception:  # already finalised by Zenoh (the session closing): harmless
                 log.debug("dropping a fetch query failed", exc_info=True)
 
+    def answers_for(self, robot: str, relayed: bool = False) -> bool:
+        """Whether this robot answers a fetch of ``robot``'s messages: its own, those of a
+        robot it does not see, and any the asker cannot reach (``relayed``). N robots
+        answering every query would send each message N - 1 times."""
+        return robot in ("*", self.robot) or relayed or robot not in self.peers()
+
     def fetch(
         self,
         robot: str,
         kind: str = DEFAULT_KIND,
         since_seq: int = 0,
         timeout: float | None = None,
+        relay: bool = False,
     ) -> list[tuple[int, bytes]]:
-        """Ask the present peers for ``robot``'s messages of ``kind`` with seq ≥ ``since_seq``.
+        """Ask the present peers for ``robot``'s messages of ``kind`` with seq ≥ ``since_seq``;
+        ``relay``: ``robot`` is out of our reach, so every peer holding them answers.
 
         Returns ``(seq, payload)`` sorted by seq, one per seq (the first reply wins when several
         peers hold it). Waits at most ``timeout`` seconds (default ``config.fetch_timeout``) and
@@ -404,8 +417,9 @@ class Transport:
         check_name("robot", robot)
         check_name("kind", kind)
         check_seq(since_seq, "since_seq")
+        relayed = ";relay=1" if relay else ""
         found = self._query(
-            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}",
+            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}{relayed}",
             timeout,
             lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
         )
