@@ -2,12 +2,14 @@
 through it."""
 
 import json
+import os
 import socket
 import socketserver
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import zenoh
@@ -15,7 +17,7 @@ import zenoh
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
 from gmmap.fleet.keys import free_port
-from gmmap.fleet.links import ZENOH_NO_GOSSIP, LinkOptions, Relay
+from gmmap.fleet.links import HEADER_BYTES, ZENOH_NO_GOSSIP, LinkOptions, Relay
 
 
 class _Echo(socketserver.BaseRequestHandler):
@@ -58,6 +60,9 @@ def test_every_byte_is_carried_and_counted(echo) -> None:
     assert back == payload
     assert counts["forward"].bytes == counts["backward"].bytes == len(payload)
     assert counts["forward"].chunks >= 1
+    for d in counts.values():  # the kernel's packets, each with its headers
+        assert d.packets >= len(payload) // 65536 + 2  # the handshake and the data
+        assert d.wire_bytes >= d.bytes + d.packets * HEADER_BYTES
 
 
 def test_the_rate_cap_holds(echo) -> None:
@@ -198,3 +203,110 @@ def test_a_robot_reaches_another_only_through_a_third(tmp_path) -> None:
         built = reports[a]["submaps_built"]
         assert built > 0 and reports[b]["held"].get(a) == built, (a, b)
     assert r["lost"] == {"robot_0": 0, "robot_1": 0, "robot_2": 0}
+
+
+NETNS_CLIENT = """
+import socket, sys, time
+sock = socket.create_connection((sys.argv[1], int(sys.argv[2])), timeout=30)
+for k in range(300):  # small and large messages, each echoed before the next
+    message = bytes([k % 256]) * (40 + (k * 997) % 3000)
+    sock.sendall(message)
+    got = 0
+    while got < len(message):
+        got += len(sock.recv(65536))
+time.sleep(0.3)  # the last ACKs
+sock.close()
+"""
+NETNS_ECHO = """
+import socket, sys
+server = socket.create_server((sys.argv[1], int(sys.argv[2])))
+print("ready", flush=True)
+conn, _ = server.accept()
+while data := conn.recv(65536):
+    conn.sendall(data)
+"""
+
+
+# Without ethtool: its legacy ioctls, TSO and GSO off, so that the kernel hands the veth pair
+# packets no larger than the MTU, as a real interface puts them on the wire.
+NO_OFFLOADS = """
+import ctypes, fcntl, socket, struct, sys
+for cmd in (0x1F, 0x24):  # ETHTOOL_STSO, ETHTOOL_SGSO
+    value = ctypes.create_string_buffer(struct.pack("II", cmd, 0))
+    request = struct.pack("16sP", sys.argv[1].encode(), ctypes.addressof(value))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        fcntl.ioctl(sock.fileno(), 0x8946, request)  # SIOCETHTOOL
+"""
+
+
+def _run(*cmd: str, ns: str | None = None) -> None:
+    where = ["ip", "netns", "exec", ns] if ns else []
+    subprocess.run([*where, *cmd], check=True, capture_output=True, timeout=10)
+
+
+def _rx(dev: str) -> tuple[int, int]:
+    """Packets and bytes ``dev`` received: what its namespace's side sent."""
+    stats = [f"/sys/class/net/{dev}/statistics/rx_{k}" for k in ("packets", "bytes")]
+    return tuple(int(Path(f).read_text()) for f in stats)
+
+
+@pytest.fixture
+def namespaces():
+    """Two network namespaces, each joined to this one by a veth pair with IPv6 off, so that
+    only the test's traffic and ARP cross it. Yields per namespace (name, our address, its
+    address, our device)."""
+    made, out = [], []
+    try:
+        for k in (1, 2):
+            ns, ours, theirs = f"gmmap{os.getpid()}n{k}", f"gmv{os.getpid()}n{k}", "gmw"
+            _run("ip", "netns", "add", ns)
+            made.append((ns, ours))
+            _run("ip", "link", "add", ours, "type", "veth", "peer", "name", theirs, "netns", ns)
+            _run("sysctl", "-qw", f"net.ipv6.conf.{ours}.disable_ipv6=1")
+            _run("sysctl", "-qw", f"net.ipv6.conf.{theirs}.disable_ipv6=1", ns=ns)
+            _run("ip", "addr", "add", f"10.{k}.77.1/24", "dev", ours)
+            _run("ip", "link", "set", ours, "up")
+            _run("ip", "addr", "add", f"10.{k}.77.2/24", "dev", theirs, ns=ns)
+            _run("ip", "link", "set", theirs, "up", ns=ns)
+            _run(sys.executable, "-c", NO_OFFLOADS, ours)
+            _run(sys.executable, "-c", NO_OFFLOADS, theirs, ns=ns)
+            out.append((ns, f"10.{k}.77.1", f"10.{k}.77.2", ours))
+    except (OSError, subprocess.SubprocessError) as err:
+        _remove(made)
+        pytest.skip(f"cannot make network namespaces here (needs root and iproute2): {err}")
+    yield out
+    _remove(made)
+
+
+def _remove(made: list[tuple[str, str]]) -> None:
+    for ns, dev in made:
+        subprocess.run(["ip", "link", "del", dev], capture_output=True, timeout=10)
+        subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=10)
+
+
+def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
+    """A client in one namespace talks through the relay (here) to an echo server in
+    another: what the relay reports for each direction, packets and bytes with headers, is
+    what the veth pair on that side carried, within 5 %."""
+    (ns_a, here_a, _, dev_a), (ns_b, _, there_b, dev_b) = namespaces
+    port = free_port()
+    echo = [sys.executable, "-c", NETNS_ECHO, there_b, str(port)]
+    server = subprocess.Popen(["ip", "netns", "exec", ns_b, *echo], stdout=subprocess.PIPE)
+    try:
+        assert server.stdout.readline().strip() == b"ready"
+        with Relay((there_b, port), host=here_a) as relay:
+            before = _rx(dev_a), _rx(dev_b)
+            _run(sys.executable, "-c", NETNS_CLIENT, here_a, str(relay.port), ns=ns_a)
+            time.sleep(0.3)
+            after = _rx(dev_a), _rx(dev_b)
+            counts = relay.counts()
+    finally:
+        server.kill()
+        server.wait()
+    for name, was, now in zip(("forward", "backward"), before, after, strict=True):
+        packets, size = now[0] - was[0], now[1] - was[1]
+        d = counts[name]
+        print(f"{name}: relay {d.packets} packets {d.wire_bytes} B, interface {packets} {size}")
+        assert d.bytes > 400_000
+        assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
+        assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)

@@ -103,18 +103,27 @@ def _start_relays(config: Config, ports: list[int]) -> dict:
 
 
 def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dict:
-    """What the relays carried: per robot the bytes it put on its links and took off them,
-    per link each direction, and the bytes per submap delivered to a peer."""
-    wire = {n: {"bytes": 0, "received_bytes": 0, "chunks": 0} for n in names}
+    """What the relays carried: per robot the packets it put on its links and their bytes,
+    headers included (``bytes``), the payload under them (``payload_bytes``: Zenoh's framing,
+    keep-alives and queries, what the relay read), the bytes it took off them; per link each
+    direction; and the bytes per submap delivered to a peer."""
+    keys = ("bytes", "packets", "payload_bytes", "received_bytes", "chunks")
+    wire = {n: dict.fromkeys(keys, 0) for n in names}
     links = []
     for (i, j), relay in sorted(relays.items()):
         c = relay.counts()
         a, b = names[i], names[j]
         for sender, receiver, d in ((a, b, c["forward"]), (b, a, c["backward"])):
-            wire[sender]["bytes"] += d.bytes
+            wire[sender]["bytes"] += d.wire_bytes
+            wire[sender]["packets"] += d.packets
+            wire[sender]["payload_bytes"] += d.bytes
             wire[sender]["chunks"] += d.chunks
-            wire[receiver]["received_bytes"] += d.bytes
-        links.append({"robots": [a, b], "bytes": [c["forward"].bytes, c["backward"].bytes]})
+            wire[receiver]["received_bytes"] += d.wire_bytes
+        links.append({
+            "robots": [a, b],
+            "bytes": [c["forward"].wire_bytes, c["backward"].wire_bytes],
+            "packets": [c["forward"].packets, c["backward"].packets],
+        })  # fmt: skip
     delivered = sum(received.values())
     total = sum(w["bytes"] for w in wire.values())
     return {

@@ -9,8 +9,12 @@ probability. During an outage no byte moves either way; the connections stay ope
 out of range leaves them), and Zenoh's lease decides when a peer is gone.
 
 What the relay counts is all that Zenoh put on the socket: its framing, keep-alives, liveliness
-and queries included. TCP/IP headers it cannot see (``Relay.counts`` reports the chunks it
-read, not packets).
+and queries included, and, from the kernel's own counts of its sockets (``TCP_INFO``), the
+packets each side sent, ACKs, handshakes and retransmissions included. ``LinkCount.wire_bytes``
+adds each packet's headers to the payload: IPv4, TCP with the timestamp option where the
+connection negotiated it, and Ethernet (`HEADER_BYTES`). A direction is counted where the
+relay receives it, as its sender segmented it: the connecting side's packets on the relay's
+accepted socket, the target's on the socket to the target.
 
 Peers in Zenoh's peer mode tell each other where they listen (gossip) and would connect
 directly, around the relay; a fleet behind relays turns gossip off
@@ -21,8 +25,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import random
 import socket
+import struct
 import threading
 import time
 from dataclasses import dataclass, field
@@ -33,21 +39,54 @@ from gmmap.options import LinkOptions
 ZENOH_NO_GOSSIP = {"scouting/gossip/enabled": False}
 CHUNK = 4096  # bytes read at once
 BUFFER = 8  # chunks in flight per direction before the relay stops reading (back-pressure)
+HEADER_BYTES = 14 + 20 + 20  # per packet: Ethernet, IPv4 and TCP without options
+TIMESTAMP_BYTES = 12  # the TCP timestamp option, padded, on every packet once negotiated
+_TCPI_OPT_TIMESTAMPS = 1
 
 
 @dataclass
 class LinkCount:
-    """What crossed one direction of a relay: bytes and the chunks they came in."""
+    """What crossed one direction of a relay: the payload bytes and the chunks they came in,
+    and the packets on the link with their headers (``wire_bytes``)."""
 
     bytes: int = 0
     chunks: int = 0
     stalls: int = 0
+    packets: int = 0
+    wire_bytes: int = 0
+
+
+@dataclass(frozen=True)
+class Received:
+    """What one TCP socket received, as the kernel counts it (``TCP_INFO``)."""
+
+    packets: int = 0
+    wire_bytes: int = 0
+
+
+def received(sock: socket.socket) -> Received:
+    """The packets ``sock`` received and their bytes with headers; nothing where the kernel
+    does not say (not Linux, or older than 4.19)."""
+    try:
+        info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 232)
+    except (OSError, AttributeError):
+        return Received()
+    if len(info) < 208:
+        return Received()
+    (payload,) = struct.unpack_from("Q", info, 128)  # tcpi_bytes_received
+    (packets,) = struct.unpack_from("I", info, 140)  # tcpi_segs_in
+    header = HEADER_BYTES + (TIMESTAMP_BYTES if info[5] & _TCPI_OPT_TIMESTAMPS else 0)
+    return Received(packets, payload + packets * header)
 
 
 @dataclass
 class _Direction:
     count: LinkCount = field(default_factory=LinkCount)
     free_at: float = 0.0  # when the rate cap lets the next byte go (monotonic)
+
+
+def _dup(sock) -> socket.socket:
+    return socket.socket(fileno=os.dup(sock.fileno()))
 
 
 class Relay:
@@ -58,10 +97,16 @@ class Relay:
     connecting side sent, "backward" what it received.
     """
 
-    def __init__(self, target: tuple[str, int], shape: LinkOptions | None = None, port: int = 0):
+    def __init__(
+        self,
+        target: tuple[str, int],
+        shape: LinkOptions | None = None,
+        port: int = 0,
+        host: str = "127.0.0.1",
+    ):
         self.target = target
         self.shape = shape or LinkOptions()
-        self._port = port
+        self._port, self._host = port, host
         self._rng = random.Random(self.shape.seed)
         self._dirs = {"forward": _Direction(), "backward": _Direction()}
         self._lock = threading.Lock()
@@ -70,6 +115,9 @@ class Relay:
         self._server: asyncio.base_events.Server | None = None
         self._tasks: set[asyncio.Task] = set()
         self._t0 = time.monotonic()
+        # Each live connection's (accepted, upstream) sockets, and what closed ones received.
+        self._sockets: set[tuple[socket.socket, socket.socket]] = set()
+        self._closed = {"forward": Received(), "backward": Received()}
 
     @property
     def port(self) -> int:
@@ -77,7 +125,7 @@ class Relay:
 
     @property
     def endpoint(self) -> str:
-        return f"tcp/127.0.0.1:{self._port}"
+        return f"tcp/{self._host}:{self._port}"
 
     def start(self) -> Relay:
         self._thread.start()
@@ -87,7 +135,15 @@ class Relay:
 
     def counts(self) -> dict[str, LinkCount]:
         with self._lock:
-            return {k: LinkCount(**vars(d.count)) for k, d in self._dirs.items()}
+            out = {k: LinkCount(**vars(d.count)) for k, d in self._dirs.items()}
+            seen = {k: [r] for k, r in self._closed.items()}
+            for accepted, upstream in self._sockets:
+                seen["forward"].append(received(accepted))
+                seen["backward"].append(received(upstream))
+        for k, parts in seen.items():
+            out[k].packets = sum(r.packets for r in parts)
+            out[k].wire_bytes = sum(r.wire_bytes for r in parts)
+        return out
 
     def close(self) -> None:
         if not self._thread.is_alive():
@@ -109,7 +165,7 @@ class Relay:
     async def _serve(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind(("127.0.0.1", self._port))
+        sock.bind((self._host, self._port))
         self._port = sock.getsockname()[1]
         self._server = await asyncio.start_server(self._accept, sock=sock)
         self._t0 = time.monotonic()
@@ -132,14 +188,28 @@ class Relay:
             asyncio.ensure_future(self._pump(up_reader, writer, "backward")),
         ]
         self._tasks.update(pumps)
+        # Duplicates: asyncio closes its sockets at the peer's EOF, and the kernel's counts
+        # would go with them before the last could be read.
+        pair = tuple(_dup(w.get_extra_info("socket")) for w in (writer, up_writer))
+        with self._lock:
+            self._sockets.add(pair)
         with contextlib.suppress(asyncio.CancelledError):
             # One side closing closes the other, as a TCP link would.
             await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
         for task in pumps:
             task.cancel()
             self._tasks.discard(task)
+        with self._lock:
+            self._sockets.discard(pair)
+            for name, sock in zip(("forward", "backward"), pair, strict=True):
+                r, before = received(sock), self._closed[name]
+                self._closed[name] = Received(
+                    before.packets + r.packets, before.wire_bytes + r.wire_bytes
+                )
         for w in (writer, up_writer):
             w.close()
+        for sock in pair:
+            sock.close()
 
     async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, name: str):
         """Reads chunks and releases each when the rate cap, the delay, a stall and any outage
