@@ -16,10 +16,14 @@ import json
 import threading
 from collections.abc import Iterable, Mapping
 
-from gmmap.options import NAME_RE
+from gmmap.names import NAME_RE
 
 KIND = "have"
-ADVERT_EVERY_S = 1.0  # while a robot lingers, what it holds goes to its peers this often
+# While a robot lingers, what it holds goes to its peers when it changes, at most once per
+# SETTLE_S, and again every ADVERT_EVERY_S in case a link was down. Each advert costs about
+# 80 B of payload and two packets per peer.
+SETTLE_S = 1.0
+ADVERT_EVERY_S = 5.0
 FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
 PROGRESS_EVERY_S = 5.0
 MAX_BYTES = 65_536
@@ -70,6 +74,11 @@ class Holdings:
                 self._peers[peer] = advert
         return advert is not None
 
+    def adverts(self) -> dict[str, dict[str, int]]:
+        """The latest counts each peer told."""
+        with self._lock:
+            return {peer: dict(held) for peer, (held, _) in self._peers.items()}
+
     def lacking(self, mine: Mapping[str, int], present: Iterable[str]) -> dict[str, dict[str, int]]:
         """Per peer that does not hold what we hold, or holds more: ``they_lack`` and
         ``we_lack``, submaps summed over robots (-1 each while a present peer has not told
@@ -88,6 +97,11 @@ class Holdings:
             if they or we:
                 out[peer] = {"they_lack": they, "we_lack": we}
         return out
+
+
+def wanted(adverts: Mapping[str, Mapping[str, int]], mine: Mapping[str, int]) -> list[str]:
+    """The robots some advert holds more submaps of than ``mine``: the fetches worth a query."""
+    return sorted({r for held in adverts.values() for r, n in held.items() if n > mine.get(r, 0)})
 
 
 def describe(lacking: dict[str, dict[str, int]]) -> str:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import socket
 
 from gmmap.errors import TransportConfigError
-from gmmap.options import NAME_RE
+from gmmap.names import NAME_RE
 
 PREFIX = "gmmap"
 

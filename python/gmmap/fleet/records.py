@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gmmap.errors import InvalidInputError
+from gmmap.mapping.place import Candidate, Match
+from gmmap.math.register import Registration
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,27 @@ class Edge:
     status: str = "accepted"
     id: int | None = None
     created: float | None = None
+
+
+def edge_of(m: Match) -> Edge:
+    """A judged match as the edge the store keeps."""
+    r = m.registration
+    return Edge(
+        m.candidate.robot,
+        m.candidate.seq,
+        *m.query,
+        r.transform,
+        r.information,
+        float(min(1.0, max(0.0, r.confidence))),
+        "accepted" if m.accepted else "rejected",
+    )
+
+
+def match_of(e: Edge) -> Match:
+    """A stored edge as the match it was judged to be (its registration as stored)."""
+    reg = Registration(np.asarray(e.transform), e.confidence, np.asarray(e.information), 0, 0.0)
+    candidate = Candidate(e.target_robot, e.target_seq, float("nan"))
+    return Match((e.source_robot, e.source_seq), candidate, reg, e.status == "accepted")
 
 
 def _check_text(what: str, value: object) -> str:

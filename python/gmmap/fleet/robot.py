@@ -37,19 +37,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from gmmap.config import Config
 from gmmap.errors import DecodeError, TransportError
 from gmmap.fleet import holdings
 from gmmap.fleet.codec import decode, encode
-from gmmap.fleet.store import Edge, Store
+from gmmap.fleet.records import edge_of, match_of
+from gmmap.fleet.store import Store
 from gmmap.fleet.transport import Transport, TransportConfig
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.mapper import Mapper
-from gmmap.mapping.place import Candidate, Match
 from gmmap.mapping.submap import Submap, SubmapBuilder
-from gmmap.math.register import Registration
 
 __all__ = ["Arrived", "Built", "RobotNode"]
 
@@ -100,7 +97,8 @@ class RobotNode:
         self.store = Store(path)
         self.mapper = Mapper(config)
         self.inbox: queue.Queue[Arrived | None] = queue.Queue()
-        self.fetch_queue: queue.Queue[str | None] = queue.Queue()
+        # A peer that joined (str), robots a peer holds more of (tuple), None: stop.
+        self.fetch_queue: queue.Queue[str | tuple[str, ...] | None] = queue.Queue()
         self._lock = threading.Lock()
         self._stopping = threading.Event()
         self._changed = threading.Event()  # the graph changed since the last optimisation
@@ -108,7 +106,7 @@ class RobotNode:
         self._busy = 0  # inbox items taken and not finished, and a running optimisation
         self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
         self.holdings = holdings.Holdings()  # what the peers say they hold
-        self._adverts = 0
+        self._adverts, self._told_at = 0, 0.0
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.wire: dict[int, dict] = {}  # own seq → bytes
@@ -139,7 +137,7 @@ class RobotNode:
         for e in self.store.edges():
             nodes = ((e.target_robot, e.target_seq), (e.source_robot, e.source_seq))
             if all(n in self.mapper.submaps for n in nodes):
-                self.mapper.add_match(_match_of(e))
+                self.mapper.add_match(match_of(e))
             else:  # one of its submaps did not decode: judged again if it arrives again
                 log.warning("%s: stored edge %s → %s lacks a submap; dropped", self.robot, *nodes)
         self._changed.set()
@@ -195,24 +193,25 @@ class RobotNode:
             return False
         start = time.monotonic()
         end = start + max(seconds, self.config.robot.deadline)
-        self._catch_up()
         told, changed, advert, fetch, said = None, start, start, start, start
         complete = False
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
             lacking = self.holdings.lacking(mine, self.transport.peers())
             if mine != told:
-                told, changed, advert = mine, now, now  # told at once
+                told, changed = mine, now
+                advert = min(advert, max(now, self._told_at + holdings.SETTLE_S))
             if now >= advert:
                 self._advertise(mine)
                 advert = now + holdings.ADVERT_EVERY_S
             # The final advert may not make it out before the session closes: the last one must.
-            settled = now >= changed + holdings.ADVERT_EVERY_S
+            settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
             if now >= start + seconds and settled and not lacking and self._idle():
                 complete = True
                 break
-            if now >= fetch and any(v["we_lack"] > 0 for v in lacking.values()):
-                self._catch_up()
+            wanted = holdings.wanted(self.holdings.adverts(), mine)
+            if now >= fetch and wanted:  # only what a peer says it holds more of
+                self.fetch_queue.put(tuple(wanted))
                 fetch = now + holdings.FETCH_EVERY_S
             if progress and lacking and now >= said + holdings.PROGRESS_EVERY_S:
                 progress(f"{self.robot}: waiting for {holdings.describe(lacking)}")
@@ -227,6 +226,7 @@ class RobotNode:
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
     def _advertise(self, counts: dict[str, int], final: bool = False) -> None:
+        self._told_at = time.monotonic()
         with contextlib.suppress(TransportError):  # closing, or the link is gone: try later
             self.transport.publish(holdings.KIND, self._adverts, holdings.encode(counts, final))
             self._adverts += 1
@@ -316,17 +316,22 @@ class RobotNode:
 
     def _fetcher(self) -> None:
         while not self.stopping:
-            peers = {self.fetch_queue.get()}
-            # One round covers every robot known: joins queued meanwhile need no round of their own.
+            items = [self.fetch_queue.get()]
+            # One round serves every request queued meanwhile.
             with contextlib.suppress(queue.Empty):
                 while True:
-                    peers.add(self.fetch_queue.get_nowait())
-            if None in peers:
+                    items.append(self.fetch_queue.get_nowait())
+            if None in items:
                 return
+            joined = {i for i in items if isinstance(i, str)}  # a peer's join: a whole round
+            wanted = {r for i in items if isinstance(i, tuple) for r in i}  # named robots only
             try:
-                self._fetch_for({p for p in peers if p is not None})
+                if joined:
+                    self._fetch_for(joined)
+                else:
+                    self._fetch(wanted - {self.robot})
             except Exception:
-                log.exception("%s: fetching from %s failed", self.robot, sorted(peers))
+                log.exception("%s: fetching %s failed", self.robot, sorted(joined | wanted))
 
     def _catch_up(self) -> None:
         for peer in self.transport.peers():
@@ -334,8 +339,15 @@ class RobotNode:
 
     def _fetch_for(self, peers: set[str]) -> None:
         """Fetch what we miss of ``peers`` and of every other robot we know (its owner answers,
-        or, when the owner is away, whoever holds it)."""
+        or, when the owner is away, whoever holds it), and of robots no one has named."""
         robots = (peers | set(self.store.robots())) - {self.robot}
+        self._fetch(robots)
+        # Robots no one present has named: those that left before we came.
+        for r, held in self.transport.fetch_unknown(robots | {self.robot}, KIND).items():
+            for seq, payload in held:
+                self._enqueue_fetched(r, seq, payload)
+
+    def _fetch(self, robots: set[str]) -> None:
         for r in sorted(robots):
             if self.stopping:
                 return
@@ -348,10 +360,6 @@ class RobotNode:
             since = gaps[0] if gaps else (max(have) + 1 if have else 0)
             relay = r not in self.transport.peers()  # handed on by whoever holds them
             for seq, payload in self.transport.fetch(r, KIND, since, relay=relay):
-                self._enqueue_fetched(r, seq, payload)
-        # Robots no one present has named: those that left before we came.
-        for r, held in self.transport.fetch_unknown(robots | {self.robot}, KIND).items():
-            for seq, payload in held:
                 self._enqueue_fetched(r, seq, payload)
 
     def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
@@ -414,7 +422,7 @@ class RobotNode:
             if self.stopping:
                 return
             for m in self.mapper.verify([s]):
-                self.store.put_edge(_edge_of(m))
+                self.store.put_edge(edge_of(m))
                 if self.mapper.add_match(m) is not None:
                     self._changed.set()
 
@@ -472,23 +480,3 @@ def _sizes(s: Submap, wire: int, n_points: int | None) -> dict:
         "gmm_float32": int(s.gmm.float32_bytes),
         "components": len(s.gmm),
     }
-
-
-def _edge_of(m: Match) -> Edge:
-    r = m.registration
-    return Edge(
-        m.candidate.robot,
-        m.candidate.seq,
-        *m.query,
-        r.transform,
-        r.information,
-        float(min(1.0, max(0.0, r.confidence))),
-        "accepted" if m.accepted else "rejected",
-    )
-
-
-def _match_of(e: Edge) -> Match:
-    """A stored edge as the match it was judged to be (its registration as stored)."""
-    reg = Registration(np.asarray(e.transform), e.confidence, np.asarray(e.information), 0, 0.0)
-    candidate = Candidate(e.target_robot, e.target_seq, float("nan"))
-    return Match((e.source_robot, e.source_seq), candidate, reg, e.status == "accepted")

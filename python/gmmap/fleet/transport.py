@@ -14,9 +14,8 @@ sender holds, `gmmap.fleet.holdings`; never fetched).
 Every robot that called :meth:`Transport.serve` answers fetch queries from its provider (its
 store), for its own data and for other robots' data it holds, so a robot that was away can catch
 up from whoever is present. Another robot's data it leaves to that robot while it sees it
-(`Transport.answers_for`), unless the asker says it cannot reach it: then robots in between
-hand it on, which is how submaps cross a fleet whose robots do not all meet (multi-hop).
-Replies use the message key expressions above.
+(`Transport.answers_for`), unless the asker cannot reach it: then robots in between hand it on
+(multi-hop). Replies use the message key expressions above.
 
 Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each direction,
 
@@ -27,9 +26,10 @@ Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each 
 - ``fetch_messages``, ``fetch_payload_bytes``: the part of the above that travelled as fetch
   replies.
 
-Not counted: Zenoh's framing, TCP/IP headers, liveliness and query control traffic (the Python
-API does not expose them). Received messages are counted once accepted (right fleet, another
-robot, well-formed key); dropped ones only increment ``ignored``.
+Not counted here: Zenoh's framing, TCP/IP headers, liveliness and query control traffic (the
+Python API does not expose them; `gmmap.fleet.links` counts them on a link). Received messages
+are counted once accepted (right fleet, another robot, well-formed key); dropped ones only
+increment ``ignored``.
 
 Presence: a robot that closes its transport leaves at once; one that dies leaves when Zenoh's
 lease expires (10 s by default). Two live sessions with one robot name count as one robot (Zenoh
@@ -48,7 +48,6 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import Any
 
 import zenoh
@@ -66,7 +65,8 @@ from gmmap.fleet.keys import (
 )
 from gmmap.fleet.session import open_session
 from gmmap.fleet.worker import Worker, call_logged
-from gmmap.options import NAME_RE, TransportOptions, check_name
+from gmmap.names import NAME_RE, check_name
+from gmmap.options import TransportOptions
 
 __all__ = [
     "ByteCount",
@@ -163,12 +163,7 @@ class Transport:
     def __enter__(self) -> Transport:
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     @property
@@ -393,9 +388,8 @@ class Transport:
                 log.debug("dropping a fetch query failed", exc_info=True)
 
     def answers_for(self, robot: str, relayed: bool = False) -> bool:
-        """Whether this robot answers a fetch of ``robot``'s messages: its own, those of a
-        robot it does not see, and any the asker cannot reach (``relayed``). N robots
-        answering every query would send each message N - 1 times."""
+        """Whether we answer a fetch of ``robot``'s messages: our own, those of a robot we
+        do not see, any the asker cannot reach (``relayed``); not all N - 1 copies."""
         return robot in ("*", self.robot) or relayed or robot not in self.peers()
 
     def fetch(
@@ -417,9 +411,8 @@ class Transport:
         check_name("robot", robot)
         check_name("kind", kind)
         check_seq(since_seq, "since_seq")
-        relayed = ";relay=1" if relay else ""
         found = self._query(
-            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}{relayed}",
+            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}{';relay=1' * relay}",
             timeout,
             lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
         )
