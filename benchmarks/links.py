@@ -1,15 +1,19 @@
 """The demo over emulated links: submaps lost, time and bytes, against perfect links.
 
 Prints one JSON object. Each case runs the whole demo (`gmmap.cli.demo.run_demo`, robots as
-separate processes) with one counting relay between every two robots (`gmmap.fleet.links`):
-perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss (a 0.2 s TCP stall
-per lost chunk) and two partitions of 30 s. Per case: submaps lost (built but never delivered
-to a peer; goal 0), whether every robot ended complete, the wall time, the bytes on the wire
-per delivered submap (Zenoh's framing, adverts and fetches included, TCP/IP headers not;
-goal <= 1,000 B) and whether the robots end holding the same submaps and groups as on
-perfect links. Rendezvous links and kill -9 restarts are not among the cases.
+separate processes) with one counting relay between every two linked robots
+(`gmmap.fleet.links`): perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss
+(a 0.2 s TCP stall per lost chunk), two partitions of 30 s, and a chain (robot i linked to
+i + 1 only: the others' submaps go through the robots in between). Per case: submaps lost
+(built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
+time, the time until every robot held every submap, the bytes on the wire per delivered
+submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
+whether the robots end holding the same submaps and groups as on perfect links. With
+``--plots DIR``, each robot count's map completeness over time, one curve per case
+(``completeness_<n>_robots.png``). Rendezvous links are not among the cases; kill -9 and
+restart is `tests/test_crash.py`.
 
-    .venv/bin/python benchmarks/links.py [--robots 3,5] [--cases perfect,10k,...]
+    .venv/bin/python benchmarks/links.py [--robots 3,5] [--cases perfect,10k,...] [--plots DIR]
 """
 
 from __future__ import annotations
@@ -21,8 +25,11 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from gmmap.cli.demo import backend_follows_drift, run_demo
 from gmmap.config import Config
+from gmmap.eval.fleetplots import completeness, plot_completeness
 from gmmap.options import LinkOptions, RobotOptions, SimOptions
 
 CASES = {
@@ -32,6 +39,7 @@ CASES = {
     "500": LinkOptions(rate=500),
     "loss_30": LinkOptions(loss=0.3),
     "partitions_2x30s": LinkOptions(outages=((5.0, 35.0), (45.0, 75.0))),
+    "chain": LinkOptions(topology="chain"),
 }
 
 
@@ -41,7 +49,10 @@ def case(robots: int, link: LinkOptions) -> dict:
     with tempfile.TemporaryDirectory() as out:
         r = run_demo(config, None, Path(out), lambda m: None)
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
+        curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     return {
+        "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1),
+        "curve": fleet_curve(curves),
         "lost": sum(r["lost"].values()),
         "complete": all(rep["complete"] for rep in reports.values()),
         "wall_s": round(r["wall_s"], 1),
@@ -50,6 +61,13 @@ def case(robots: int, link: LinkOptions) -> dict:
         "groups": r["groups"],
         "held": {n: rep["held"] for n, rep in reports.items()},
     }
+
+
+def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
+    """The robots' completeness curves as one: the mean share held over time."""
+    t = np.unique(np.concatenate([t for t, _ in curves.values()]))
+    held = [np.interp(t, ct, share, left=0.0) for ct, share in curves.values()]
+    return t.round(2).tolist(), np.mean(held, axis=0).round(4).tolist()
 
 
 def ended(row: dict) -> tuple:
@@ -61,6 +79,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="3,5")
     parser.add_argument("--cases", default=",".join(CASES))
+    parser.add_argument("--plots", type=Path, help="Write completeness PNGs here.")
     args = parser.parse_args()
     out: dict = {}
     for robots in (int(n) for n in args.robots.split(",")):
@@ -72,8 +91,13 @@ def main() -> None:
         perfect = rows.get("perfect")
         for row in rows.values():
             row["same_as_perfect"] = perfect is not None and ended(row) == ended(perfect)
+        if args.plots:
+            args.plots.mkdir(parents=True, exist_ok=True)
+            curves = {name: tuple(map(np.array, row["curve"])) for name, row in rows.items()}
+            title = f"{robots} robots: mean share of all submaps held"
+            plot_completeness(curves, args.plots / f"completeness_{robots}_robots.png", title)
         for row in rows.values():
-            del row["held"]
+            del row["held"], row["curve"]
         out[f"{robots}_robots"] = rows
     print(json.dumps(out, indent=1))
 

@@ -11,11 +11,13 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
+from gmmap.eval.fleetplots import completeness
 from gmmap.fleet.keys import free_port
 from gmmap.fleet.links import HEADER_BYTES, ZENOH_NO_GOSSIP, LinkOptions, Relay
 
@@ -188,7 +190,8 @@ def test_a_robot_reaches_another_only_through_a_third(tmp_path) -> None:
     out = subprocess.run(
         [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "3",
          "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--link-topology", "chain", "--deadline", "60", "--max-frames", "120"],
+         "--link-topology", "chain", "--deadline", "60", "--max-frames", "120",
+         "--plots", str(tmp_path / "plots")],
         capture_output=True, text=True, timeout=240,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
@@ -203,6 +206,11 @@ def test_a_robot_reaches_another_only_through_a_third(tmp_path) -> None:
         built = reports[a]["submaps_built"]
         assert built > 0 and reports[b]["held"].get(a) == built, (a, b)
     assert r["lost"] == {"robot_0": 0, "robot_1": 0, "robot_2": 0}
+    # Each robot's completeness over time, from its store, ends at every submap held.
+    curves = completeness({n: tmp_path / f"{n}.sqlite" for n in reports})
+    assert all(share[-1] == 1.0 and np.all(np.diff(t) >= 0) for t, share in curves.values())
+    assert [Path(p).name for p in r["plots"]] == ["bytes.png", "completeness.png"]
+    assert all(Path(p).read_bytes()[:4] == b"\x89PNG" for p in r["plots"])
 
 
 NETNS_CLIENT = """

@@ -103,3 +103,18 @@ def test_a_local_map_holds_the_neighbours_in_the_candidates_frame(recorded):
     np.testing.assert_allclose(local.means[: len(a0.gmm)], expected, atol=1e-12)
     share = a0.n_points / (a0.n_points + a1.n_points)
     np.testing.assert_allclose(local.weights[: len(a0.gmm)].sum(), share, atol=1e-12)
+
+
+def test_rejudged_gives_the_offline_merge_whatever_the_arrival_order(recorded):
+    _, submaps = recorded
+    offline, _ = merge(submaps, CONFIG)
+    live = Mapper(CONFIG)
+    arrivals = [s for pair in zip(submaps["b"][::-1], submaps["a"], strict=False) for s in pair]
+    for s in arrivals:  # one at a time, b's newest first: pairs judged against what is held
+        live.add([s])
+    fresh = live.rejudged()
+    assert judged(fresh).keys() == judged(offline).keys()
+    for pair, (accepted, transform) in judged(offline).items():
+        assert judged(fresh)[pair][0] == accepted
+        np.testing.assert_allclose(judged(fresh)[pair][1], transform, atol=1e-12)
+    assert fresh.frames.groups() == offline.frames.groups()

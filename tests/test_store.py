@@ -106,6 +106,12 @@ def test_meta(tmp_path: Path):
         assert store.meta() == {"fleet": "lab", "robot": "b"}
         with pytest.raises(InvalidInputError):
             store.set_meta("n", 3)
+        # A submap and how far the input got go in together, or neither does.
+        assert store.put_submap("a", 0, b"s0", own=True, meta={"frames": "20"})
+        assert store.get_meta("frames") == "20"
+        with pytest.raises(InvalidInputError):
+            store.put_submap("a", 1, b"s1", own=True, meta={"frames": 40})
+        assert store.seqs("a") == [0] and store.get_meta("frames") == "20"
 
 
 def test_restart_keeps_everything(tmp_path: Path):

@@ -335,7 +335,9 @@ class RobotOptions:
     ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
     ``linger``: seconds it keeps receiving, matching and optimising after its frames end;
     then it stays until the peers in reach hold what it holds and it holds what they hold, or
-    until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`)."""
+    until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
+    ``rejudge``: at the end, every pair held is judged again in one call, so that the final
+    maps are an offline merge's of the same submaps, whatever order they arrived in."""
 
     name: str = "robot"
     fleet: str = "gmmap"
@@ -344,6 +346,7 @@ class RobotOptions:
     wait_timeout: float = 30.0
     linger: float = 5.0
     deadline: float = 120.0
+    rejudge: bool = True
 
     def __post_init__(self) -> None:
         check_name("robot.name", self.name)

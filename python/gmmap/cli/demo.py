@@ -26,9 +26,8 @@ import numpy as np
 
 from gmmap.cli.common import MIN_MATCHES, as_json_option, config_option, log, setting, sim_settings
 from gmmap.config import Config
+from gmmap.eval.fleetplots import DESCRIPTOR_BYTES
 from gmmap.options import TOPOLOGIES, SimOptions, drift_overrides
-
-DESCRIPTOR_BYTES = 1024  # the paper's Fig. 9: a float32 GMM plus a 256-float descriptor
 
 
 def run_demo(
@@ -318,6 +317,8 @@ def format_report(r: dict) -> str:
     lines.append(f"map             {r.get('map_png')}")
     if r.get("map_rrd"):
         lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")
+    for path in r.get("plots", []):
+        lines.append(f"plot            {path}")
     lines.append(f"output          {r['out']}")
     lines.append(f"wall time       {r['wall_s']:.1f} s")
     return "\n".join(lines)
@@ -351,16 +352,40 @@ def format_report(r: dict) -> str:
     type=click.Path(file_okay=False, path_type=Path),
     help="Output folder (configs, stores, reports, map.png); default a new temporary folder.",
 )
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write bytes over time (the paper's Fig. 9) and map completeness PNGs here.",
+)
 @config_option
 @as_json_option
-def command(max_frames: int | None, out: Path | None, config: Config, as_json: bool) -> None:
+def command(
+    max_frames: int | None, out: Path | None, plots: Path | None, config: Config, as_json: bool
+) -> None:
     """Simulated robots as separate processes share GMM submaps over Zenoh and merge maps.
 
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
     config = backend_follows_drift(config)
     r = run_demo(config, max_frames, out, log)
+    if plots:
+        r["plots"] = write_plots(Path(r["out"]), list(r["received"]), plots)
     click.echo(json.dumps(r) if as_json else format_report(r))
+
+
+def write_plots(out: Path, names: list[str], folder: Path) -> list[str]:
+    """The demo's bytes over time (the paper's Fig. 9) and each robot's map completeness over
+    time, as PNGs in ``folder``."""
+    from gmmap.eval.fleetplots import completeness, plot_bytes, plot_completeness
+
+    folder.mkdir(parents=True, exist_ok=True)
+    stores = {n: out / f"{n}.sqlite" for n in names}
+    reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
+    paths = [
+        plot_bytes(reports, stores, folder / "bytes.png"),
+        plot_completeness(completeness(stores), folder / "completeness.png", "each robot"),
+    ]
+    return [str(p) for p in paths]
 
 
 def backend_follows_drift(config: Config) -> Config:

@@ -220,6 +220,11 @@ class RobotNode:
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
         self._advertise(self._held(), final=True)  # done: the peers need not wait for us
+        if self.config.robot.rejudge and not self.stopping:
+            if progress:
+                progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
+            self.mapper = self.mapper.rejudged()
+            self.store.replace_edges(edge_of(m) for m in self.mapper.matches)
         return complete
 
     def _held(self) -> dict[str, int]:
@@ -285,8 +290,9 @@ class RobotNode:
 
     def _emit(self, s: Submap, consumed: int) -> None:
         payload = encode(s)
-        self.store.put_submap(self.robot, s.seq, payload, own=True)
-        self.store.set_meta(META_FRAMES, str(consumed))
+        self.store.put_submap(
+            self.robot, s.seq, payload, own=True, meta={META_FRAMES: str(consumed)}
+        )
         self.frames_consumed = consumed
         self.counts["built"] += 1
         self.wire[s.seq] = _sizes(s, len(payload), s.n_points)

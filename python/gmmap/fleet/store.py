@@ -23,7 +23,7 @@ import math
 import sqlite3
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -265,10 +265,15 @@ class Store:
         kind: str = DEFAULT_KIND,
         own: bool = False,
         received: float | None = None,
+        meta: Mapping[str, str] | None = None,
     ) -> bool:
         """Store one message; True when new. Idempotent: an existing (robot, kind, seq) is kept
-        as it is (the first copy wins), since every copy of a message carries the same bytes."""
-        return self.put_submaps([(robot, seq, payload)], kind=kind, own=own, received=received) == 1
+        as it is (the first copy wins), since every copy of a message carries the same bytes.
+        ``meta`` values are set in the same transaction: a robot's own submap and how far its
+        input got are stored together or not at all (a crash between them would build that
+        submap again after a restart)."""
+        items = [(robot, seq, payload)]
+        return self.put_submaps(items, kind=kind, own=own, received=received, meta=meta) == 1
 
     def put_submaps(
         self,
@@ -277,10 +282,12 @@ class Store:
         kind: str = DEFAULT_KIND,
         own: bool = False,
         received: float | None = None,
+        meta: Mapping[str, str] | None = None,
     ) -> int:
-        """Store ``(robot, seq, payload)`` items in one transaction (e.g. a fetch's replies);
-        returns how many were new."""
+        """Store ``(robot, seq, payload)`` items in one transaction (e.g. a fetch's replies),
+        with ``meta`` (see `put_submap`); returns how many were new."""
         _check_text("kind", kind)
+        meta_rows = [_meta_row(k, v) for k, v in (meta or {}).items()]
         when = time.time() if received is None else float(received)
         rows = [
             (_check_text("robot", r), kind, _check_seq("seq", s), _check_payload(p), int(own), when)
@@ -293,7 +300,9 @@ class Store:
                 "VALUES (?, ?, ?, ?, ?, ?)",
                 rows,
             )
-            return conn.total_changes - before
+            new = conn.total_changes - before
+            conn.executemany(META_UPSERT, meta_rows)
+            return new
 
     def get_submap(self, robot: str, seq: int, kind: str = DEFAULT_KIND) -> SubmapRecord | None:
         """The stored message, or None."""
@@ -376,40 +385,23 @@ class Store:
     def put_edge(self, edge: Edge) -> int:
         """Store an edge and return its id. One edge per (target, source) submap pair: a later
         decision on the same pair replaces the earlier one (same id)."""
-        if edge.status not in EDGE_STATUSES:
-            raise InvalidInputError(
-                f"edge status must be one of {EDGE_STATUSES}; got {edge.status!r}"
-            )
-        confidence = float(edge.confidence)
-        if not (math.isfinite(confidence) and 0.0 <= confidence <= 1.0):
-            raise InvalidInputError(f"edge confidence must be in [0, 1]; got {edge.confidence!r}")
-        row = (
-            _check_text("target_robot", edge.target_robot),
-            _check_seq("target_seq", edge.target_seq),
-            _check_text("source_robot", edge.source_robot),
-            _check_seq("source_seq", edge.source_seq),
-            _matrix_blob("transform", edge.transform, 4),
-            _matrix_blob("information", edge.information, 6),
-            confidence,
-            edge.status,
-            time.time() if edge.created is None else float(edge.created),
-        )
+        row = _edge_row(edge)
         with self._transaction() as conn:
-            conn.execute(
-                "INSERT INTO edges (target_robot, target_seq, source_robot, source_seq, transform, "
-                "information, confidence, status, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) "
-                "ON CONFLICT (target_robot, target_seq, source_robot, source_seq) DO UPDATE SET "
-                "transform = excluded.transform, information = excluded.information, "
-                "confidence = excluded.confidence, status = excluded.status, "
-                "created = excluded.created",
-                row,
-            )
+            conn.execute(EDGE_UPSERT, row)
             found = conn.execute(
                 "SELECT id FROM edges WHERE target_robot = ? AND target_seq = ? "
                 "AND source_robot = ? AND source_seq = ?",
                 row[:4],
             ).fetchone()
             return int(found[0])
+
+    def replace_edges(self, edges: Iterable[Edge]) -> None:
+        """All stored edges become ``edges``, in one transaction (a mapper's judgements redone
+        over everything held)."""
+        rows = [_edge_row(e) for e in edges]
+        with self._transaction() as conn:
+            conn.execute("DELETE FROM edges")
+            conn.executemany(EDGE_UPSERT, rows)
 
     def edges(self, status: str | None = None, robot: str | None = None) -> list[Edge]:
         """Stored edges in insertion order; ``status`` filters accepted/rejected, ``robot`` keeps
@@ -449,15 +441,9 @@ class Store:
 
     def set_meta(self, key: str, value: str) -> None:
         """Set a small text value (robot name, fleet, last fetched seq…)."""
-        _check_text("meta key", key)
-        if not isinstance(value, str):
-            raise InvalidInputError(f"meta value must be a string; got {type(value).__name__}")
+        row = _meta_row(key, value)
         with self._transaction() as conn:
-            conn.execute(
-                "INSERT INTO meta (key, value) VALUES (?, ?) "
-                "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
-                (key, value),
-            )
+            conn.execute(META_UPSERT, row)
 
     def get_meta(self, key: str, default: str | None = None) -> str | None:
         rows = self._read("SELECT value FROM meta WHERE key = ?", (key,))
@@ -465,3 +451,44 @@ class Store:
 
     def meta(self) -> dict[str, str]:
         return dict(self._read("SELECT key, value FROM meta ORDER BY key"))
+
+
+META_UPSERT = (
+    "INSERT INTO meta (key, value) VALUES (?, ?) "
+    "ON CONFLICT (key) DO UPDATE SET value = excluded.value"
+)
+
+
+def _meta_row(key: str, value: str) -> tuple[str, str]:
+    _check_text("meta key", key)
+    if not isinstance(value, str):
+        raise InvalidInputError(f"meta value must be a string; got {type(value).__name__}")
+    return key, value
+
+
+EDGE_UPSERT = (
+    "INSERT INTO edges (target_robot, target_seq, source_robot, source_seq, transform, "
+    "information, confidence, status, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) "
+    "ON CONFLICT (target_robot, target_seq, source_robot, source_seq) DO UPDATE SET "
+    "transform = excluded.transform, information = excluded.information, "
+    "confidence = excluded.confidence, status = excluded.status, created = excluded.created"
+)
+
+
+def _edge_row(edge: Edge) -> tuple:
+    if edge.status not in EDGE_STATUSES:
+        raise InvalidInputError(f"edge status must be one of {EDGE_STATUSES}; got {edge.status!r}")
+    confidence = float(edge.confidence)
+    if not (math.isfinite(confidence) and 0.0 <= confidence <= 1.0):
+        raise InvalidInputError(f"edge confidence must be in [0, 1]; got {edge.confidence!r}")
+    return (
+        _check_text("target_robot", edge.target_robot),
+        _check_seq("target_seq", edge.target_seq),
+        _check_text("source_robot", edge.source_robot),
+        _check_seq("source_seq", edge.source_seq),
+        _matrix_blob("transform", edge.transform, 4),
+        _matrix_blob("information", edge.information, 6),
+        confidence,
+        edge.status,
+        time.time() if edge.created is None else float(edge.created),
+    )

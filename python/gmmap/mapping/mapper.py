@@ -10,7 +10,9 @@ Matching is deterministic for a given set of held submaps: the submaps given to 
 all held first, then each queries the others in (robot, seq) order, and every pair is judged
 once, in the direction of the first query that found it. Fed the same submaps in one call, a
 robot node and an offline merge judge the same pairs alike and optimise the same graph. Live,
-submaps arrive one by one, so a pair is judged when the later of its two arrives.
+submaps arrive one by one, so a pair is judged when the later of its two arrives, against
+what is held then; `Mapper.rejudged` judges everything held again in one call, which is how
+a robot ends with the maps an offline merge of its submaps gives, whatever the arrival order.
 
 Thread safety: one lock guards the held state; registration (the slow part) runs outside it,
 so one thread can match while another optimises.
@@ -32,7 +34,7 @@ from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
 from gmmap.math.gmm import Gmm
-from gmmap.math.register import register
+from gmmap.math.register import Registration, register
 
 Node = tuple[str, int]
 Progress = Callable[[str], None]
@@ -52,6 +54,8 @@ class Mapper:
         self.result: BackendResult | None = None
         self.frames = TfGraph()
         self._judged: set[frozenset[Node]] = set()
+        # (query, candidate) → its registration before refinement: deterministic, so reusable.
+        self._registrations: dict[tuple[Node, Node], Registration] = {}
         self._lock = threading.Lock()
 
     # ---- input ------------------------------------------------------------------------------
@@ -85,7 +89,7 @@ class Mapper:
         judged before is registered (once) and judged. Adds no edges (see `add_match`)."""
         matches = []
         for i, s in enumerate(submaps):
-            judged = [self.db.verify(s.robot, s.seq, s.gmm, c) for c in self._candidates(s)]
+            judged = [self._verified(s, c) for c in self._candidates(s)]
             with self._lock:
                 anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
             judged = distinct(judged, anchors, self.config.place)
@@ -96,6 +100,27 @@ class Mapper:
         with self._lock:
             self.matches.extend(matches)
         return matches
+
+    def _verified(self, s: Submap, c: Candidate) -> Match:
+        key = ((s.robot, s.seq), (c.robot, c.seq))
+        reg = self._registrations.get(key)
+        if reg is None:
+            m = self.db.verify(s.robot, s.seq, s.gmm, c)
+            self._registrations[key] = m.registration
+            return m
+        return self.db.judge(key[0], c, reg)
+
+    def rejudged(self, progress: Progress | None = None) -> Mapper:
+        """A fresh mapper over the same submaps, judged in one call and optimised, as an offline
+        merge judges them; registrations already made are reused. Live, what each judgement
+        saw depended on the order the submaps arrived in; this result does not."""
+        fresh = Mapper(self.config)
+        with self._lock:
+            held = list(self.submaps.values())
+            fresh._registrations = dict(self._registrations)
+        fresh.add(held, progress)
+        fresh.optimize()
+        return fresh
 
     def _refined(self, query: Submap, m: Match) -> Match:
         """``m`` with its pose refined against the candidate's local map, or rejected when

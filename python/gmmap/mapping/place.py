@@ -259,8 +259,11 @@ class PlaceDatabase:
         target = self.gmms[(candidate.robot, candidate.seq)]
         if target is None:
             raise InvalidInputError(f"{candidate.robot}/{candidate.seq} has no GMM to verify")
-        reg = self.register_pair(gmm, target)
-        return Match((robot, seq), candidate, reg, self.score(reg) >= self.options.min_confidence)
+        return self.judge((robot, seq), candidate, self.register_pair(gmm, target))
+
+    def judge(self, query: tuple[str, int], candidate: Candidate, reg: Registration) -> Match:
+        """The match of a registered pair, accepted when its `score` ≥ ``min_confidence``."""
+        return Match(query, candidate, reg, self.score(reg) >= self.options.min_confidence)
 
     def register_pair(self, query: Gmm, target: Gmm) -> Registration:
         """`register` with no initial guess, from the descriptor's yaw hint when it has one."""
