@@ -3,8 +3,9 @@
 Prints one JSON object. Each case runs the whole demo (`gmmap.cli.demo.run_demo`, robots as
 separate processes) with one counting relay between every two linked robots
 (`gmmap.fleet.links`): perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss
-(a 0.2 s TCP stall per lost chunk), two partitions of 30 s, and a chain (robot i linked to
-i + 1 only: the others' submaps go through the robots in between). Per case: submaps lost
+(a 0.2 s TCP stall per lost chunk), two partitions of 30 s, a chain (robot i linked to
+i + 1 only: the others' submaps go through the robots in between) and a router (every robot
+a Zenoh client of one router, linked to it alone). Per case: submaps lost
 (built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
@@ -40,6 +41,7 @@ CASES = {
     "loss_30": LinkOptions(loss=0.3),
     "partitions_2x30s": LinkOptions(outages=((5.0, 35.0), (45.0, 75.0))),
     "chain": LinkOptions(topology="chain"),
+    "router": LinkOptions(topology="router"),
 }
 
 

@@ -318,3 +318,25 @@ def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
         assert d.bytes > 400_000
         assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
         assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)
+
+
+def test_robots_as_clients_of_one_router(tmp_path) -> None:
+    """Three robots, each a Zenoh client linked only to one router: it routes their submaps,
+    adverts and fetches, and every robot ends holding everything."""
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "3",
+         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
+         "--link-topology", "router", "--deadline", "60", "--max-frames", "120"],
+        capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    assert [link["robots"] for link in r["links"]] == [[n, "router"] for n in r["received"]]
+    transport = load_config(tmp_path / "robot_0.yaml").transport
+    assert transport.mode == "client" and transport.listen == ()
+    reports = {n: json.loads((tmp_path / f"{n}.json").read_text()) for n in r["received"]}
+    built = {n: rep["submaps_built"] for n, rep in reports.items()}
+    assert all(rep["held"] == built for rep in reports.values()), (built, reports)
+    assert r["lost"] == {"robot_0": 0, "robot_1": 0, "robot_2": 0}
+    for name, wire in r["wire"].items():  # it sent its submaps and received the others'
+        assert wire["bytes"] > 0 and wire["received_bytes"] > r["bytes_received"][name] > 0

@@ -19,7 +19,7 @@ from gmmap.names import MODES, check_endpoint, check_name
 STRATEGIES = ("points", "gmm-merge", "per-frame")
 COVARIANCES = ("diag", "full")
 SENSORS = ("lidar", "depth")
-TOPOLOGIES = ("mesh", "chain")
+TOPOLOGIES = ("mesh", "chain", "router")
 
 
 @dataclass(frozen=True)
@@ -394,8 +394,9 @@ class LinkOptions:
     ``rate`` bytes/s (None: no cap), delays it by ``delay_s``, stalls a chunk for ``stall_s``
     with probability ``loss`` (TCP's retransmission after a loss) and moves nothing during the
     ``outages``, (start, end) seconds after the relays start. ``topology``: ``mesh``, a link
-    between every two robots, or ``chain``, robot i linked to i + 1 only, so that the others'
-    submaps reach a robot only through those in between.
+    between every two robots; ``chain``, robot i linked to i + 1 only, so that the others'
+    submaps reach a robot only through those in between; ``router``, every robot a Zenoh
+    client of one Zenoh router, linked to it alone (the topology of larger fleets).
     """
 
     emulate: bool = False
@@ -429,7 +430,9 @@ class LinkOptions:
         return self.emulate or bool(shaping) or self.topology != "mesh"
 
     def pairs(self, n: int) -> list[tuple[int, int]]:
-        """The linked robot pairs (i < j) of ``n`` robots."""
+        """The linked pairs (i < j) of ``n`` robots; with a router, it is number n."""
+        if self.topology == "router":
+            return [(i, n) for i in range(n)]
         if self.topology == "chain":
             return [(i, i + 1) for i in range(n - 1)]
         return [(i, j) for i in range(n) for j in range(i + 1, n)]

@@ -50,6 +50,12 @@ def run_demo(
     fleet = f"demo{os.getpid()}"
     config.save(out)
     procs = []
+    router = None
+    if config.link.topology == "router":
+        from gmmap.fleet.session import open_router
+
+        router, endpoint = open_router()
+        ports.append(int(endpoint.rsplit(":", 1)[1]))
     relays = _start_relays(config, ports)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
@@ -75,6 +81,8 @@ def run_demo(
         t.join(timeout=5)
     for relay in relays.values():
         relay.close()
+    if router is not None:
+        router.close()
     if any(codes):
         raise RuntimeError(f"robot processes exited with {codes}; see the log above")
     reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
@@ -91,13 +99,13 @@ def run_demo(
 
 
 def _start_relays(config: Config, ports: list[int]) -> dict:
-    """With emulated links, one relay per linked robot pair (i < j, `LinkOptions.pairs`) in
-    front of robot j's endpoint: robot i reaches j only through it."""
+    """With emulated links, one relay per linked pair (i < j, `LinkOptions.pairs`) in front
+    of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it."""
     from gmmap.fleet.links import Relay
 
     if not config.link.shaped:
         return {}
-    pairs = config.link.pairs(len(ports))
+    pairs = config.link.pairs(config.sim.robots)
     return {(i, j): Relay(("127.0.0.1", ports[j]), config.link).start() for i, j in pairs}
 
 
@@ -111,20 +119,21 @@ def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dic
     links = []
     for (i, j), relay in sorted(relays.items()):
         c = relay.counts()
-        a, b = names[i], names[j]
+        a, b = names[i], names[j] if j < len(names) else "router"
         for sender, receiver, d in ((a, b, c["forward"]), (b, a, c["backward"])):
-            wire[sender]["bytes"] += d.wire_bytes
-            wire[sender]["packets"] += d.packets
-            wire[sender]["payload_bytes"] += d.bytes
-            wire[sender]["chunks"] += d.chunks
-            wire[receiver]["received_bytes"] += d.wire_bytes
+            if sender in wire:  # the router is not among the robots
+                sent = zip(keys, (d.wire_bytes, d.packets, d.bytes, 0, d.chunks), strict=True)
+                for key, value in sent:
+                    wire[sender][key] += value
+            if receiver in wire:
+                wire[receiver]["received_bytes"] += d.wire_bytes
         links.append({
             "robots": [a, b],
             "bytes": [c["forward"].wire_bytes, c["backward"].wire_bytes],
             "packets": [c["forward"].packets, c["backward"].packets],
         })  # fmt: skip
     delivered = sum(received.values())
-    total = sum(w["bytes"] for w in wire.values())
+    total = sum(sum(link["bytes"]) for link in links)
     return {
         "wire": wire,
         "links": links,
@@ -146,9 +155,9 @@ def _robot_config(
     from gmmap.fleet.links import ZENOH_NO_GOSSIP
 
     name = names[i]
-    if relays:
+    if relays and config.link.topology != "router":
         linked = sorted({j for pair in relays if i in pair for j in pair} - {i})
-    else:
+    else:  # every robot in reach, directly or through the router
         linked = [j for j in range(len(names)) if j != i]
     robot = replace(
         config.robot,
@@ -158,13 +167,19 @@ def _robot_config(
         wait_for=tuple(names[j] for j in linked),
     )
     zenoh = dict(config.transport.zenoh_options)
-    if relays:
+    mode, listen = config.transport.mode, config.transport.listen
+    if config.link.topology == "router":  # a client of the router: it listens nowhere
+        mode, listen, peers = "client", (), (relays[(i, len(names))].endpoint,)
+    elif relays:
         # Gossip off: peers would tell each other their own endpoints and meet around a relay.
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
         peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
-    transport = replace(config.transport, port=ports[i], connect=peers, zenoh_options=zenoh)
+    transport = replace(
+        config.transport, mode=mode, listen=listen, port=ports[i], connect=peers,
+        zenoh_options=zenoh,
+    )  # fmt: skip
     return replace(config, robot=robot, transport=transport)
 
 
@@ -343,7 +358,8 @@ def format_report(r: dict) -> str:
 @setting(
     "--link-topology",
     "link.topology",
-    "Which robots are linked: mesh (all pairs) or chain (i to i + 1; the rest multi-hop).",
+    "Which robots are linked: mesh (all pairs), chain (i to i + 1; the rest multi-hop) or "
+    "router (each a Zenoh client of one router).",
     type=click.Choice(TOPOLOGIES),
 )
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")

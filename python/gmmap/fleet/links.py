@@ -38,6 +38,7 @@ from gmmap.options import LinkOptions
 
 ZENOH_NO_GOSSIP = {"scouting/gossip/enabled": False}
 CHUNK = 4096  # bytes read at once
+SEGMENT = 1448  # a TCP segment's payload on Ethernet with timestamps: a capped link's unit
 BUFFER = 8  # chunks in flight per direction before the relay stops reading (back-pressure)
 HEADER_BYTES = 14 + 20 + 20  # per packet: Ethernet, IPv4 and TCP without options
 TIMESTAMP_BYTES = 12  # the TCP timestamp option, padded, on every packet once negotiated
@@ -217,10 +218,9 @@ class Relay:
         queue: asyncio.Queue = asyncio.Queue(BUFFER)
         sender = asyncio.ensure_future(self._send(queue, writer, name))
         try:
-            # Small reads under a low cap, so a chunk is not a burst of seconds.
-            size = (
-                CHUNK if self.shape.rate is None else int(min(CHUNK, max(64, self.shape.rate / 20)))
-            )
+            # Under a cap, a packet at a time: it arrives whole once its time on the link has
+            # passed. Smaller chunks would have the far side send an ACK for each.
+            size = CHUNK if self.shape.rate is None else SEGMENT
             while chunk := await reader.read(size):
                 await queue.put((time.monotonic() + self.shape.delay_s, chunk))
             await queue.put(None)
