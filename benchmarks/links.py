@@ -9,7 +9,8 @@ a Zenoh client of one router, linked to it alone). Per case: submaps lost
 (built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
-whether the robots end holding the same submaps and groups as on perfect links. With
+whether the robots end holding the same submaps and groups as on perfect links. Also the
+bytes and packets an idle link between two robots carries per minute. With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
 (``completeness_<n>_robots.png``). Rendezvous links are not among the cases; kill -9 and
 restart is `tests/test_crash.py`.
@@ -23,6 +24,7 @@ import argparse
 import json
 import sys
 import tempfile
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -72,6 +74,40 @@ def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
     return t.round(2).tolist(), np.mean(held, axis=0).round(4).tolist()
 
 
+def idle(seconds: float) -> dict:
+    """What two robots' transports (presence, subscription, fetch service) put on the link
+    between them while neither has anything to send, per minute, in both directions."""
+    from gmmap.fleet.keys import free_port
+    from gmmap.fleet.links import ZENOH_NO_GOSSIP, Relay
+    from gmmap.fleet.store import Store
+    from gmmap.fleet.transport import Transport, TransportConfig
+    from gmmap.options import TransportOptions
+
+    port = free_port()
+    with tempfile.TemporaryDirectory() as tmp, Relay(("127.0.0.1", port)) as relay:
+        a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
+        b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
+        with (
+            Store(Path(tmp) / "a.db") as store,
+            Transport(TransportConfig("idle", "a", a_opts)) as a,
+            Transport(TransportConfig("idle", "b", b_opts)) as b,
+        ):
+            for t in (a, b):
+                t.serve(store.fetch_provider, store.robots)
+                t.subscribe(lambda *_: None)
+            if not b.wait_for_peers(["a"], 10):
+                raise RuntimeError("the idle robots did not meet")
+            time.sleep(2.0)  # declarations settle
+            before = relay.counts()
+            time.sleep(seconds)
+            after = relay.counts()
+    per_min = 60.0 / seconds
+    return {
+        k: round(sum(getattr(after[d], k) - getattr(before[d], k) for d in after) * per_min)
+        for k in ("wire_bytes", "packets")
+    }
+
+
 def ended(row: dict) -> tuple:
     """What the robots ended with: the submaps each held and the groups."""
     return row["held"], row["groups"]
@@ -82,8 +118,10 @@ def main() -> None:
     parser.add_argument("--robots", default="3,5")
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--plots", type=Path, help="Write completeness PNGs here.")
+    parser.add_argument("--idle-s", type=float, default=60.0, help="Idle link measured (s).")
     args = parser.parse_args()
-    out: dict = {}
+    out: dict = {"idle_link_per_minute": idle(args.idle_s)}
+    print(f"idle link: {out['idle_link_per_minute']}", file=sys.stderr, flush=True)
     for robots in (int(n) for n in args.robots.split(",")):
         rows = {}
         for name in args.cases.split(","):

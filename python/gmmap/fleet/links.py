@@ -215,7 +215,12 @@ class Relay:
     async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, name: str):
         """Reads chunks and releases each when the rate cap, the delay, a stall and any outage
         allow; a bounded queue between them gives back-pressure."""
-        queue: asyncio.Queue = asyncio.Queue(BUFFER)
+        # Under a cap, about a second of data: more held here would delay Zenoh's keep-alives
+        # past its lease (at 500 B/s, 8 segments are 23 s).
+        rate = self.shape.rate
+        queue: asyncio.Queue = asyncio.Queue(
+            BUFFER if rate is None else max(1, int(rate // SEGMENT))
+        )
         sender = asyncio.ensure_future(self._send(queue, writer, name))
         try:
             # Under a cap, a packet at a time: it arrives whole once its time on the link has
