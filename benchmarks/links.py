@@ -9,7 +9,8 @@ a Zenoh client of one router, linked to it alone). Per case: submaps lost
 (built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
-whether the robots end holding the same submaps and groups as on perfect links. Also the
+whether the robots end holding the same submaps, groups and pose-graph matches as on
+perfect links, and how far apart their optimised anchors end (m). Also the
 bytes and packets an idle link between two robots carries per minute. With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
 (``completeness_<n>_robots.png``). Rendezvous links are not among the cases; kill -9 and
@@ -64,7 +65,28 @@ def case(robots: int, link: LinkOptions) -> dict:
         "payload_bytes_per_submap": r["bytes_per_submap"]["wire"],
         "groups": r["groups"],
         "held": {n: rep["held"] for n, rep in reports.items()},
+        "kept": {n: sorted(_kept(rep)) for n, rep in reports.items()},
+        "poses": {n: rep["poses"] for n, rep in reports.items()},
     }
+
+
+def _kept(report: dict) -> list[tuple]:
+    """The robot's pose-graph match edges and what the backend made of them."""
+    return [(*e["target"], *e["source"], str(e["backend"])) for e in report["edges"]]
+
+
+def pose_difference(row: dict, perfect: dict) -> float | None:
+    """The largest distance (m) between a robot's optimised anchor here and on perfect links;
+    None when they hold different anchors."""
+    worst = 0.0
+    for name, poses in row["poses"].items():
+        other = perfect["poses"].get(name, {})
+        if poses.keys() != other.keys():
+            return None
+        for key, pose in poses.items():
+            moved = np.asarray(pose)[:3, 3] - np.asarray(other[key])[:3, 3]
+            worst = max(worst, float(np.linalg.norm(moved)))
+    return worst
 
 
 def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
@@ -109,8 +131,8 @@ def idle(seconds: float) -> dict:
 
 
 def ended(row: dict) -> tuple:
-    """What the robots ended with: the submaps each held and the groups."""
-    return row["held"], row["groups"]
+    """What the robots ended with: the submaps each held, the groups and the kept matches."""
+    return row["held"], row["groups"], row["kept"]
 
 
 def main() -> None:
@@ -131,13 +153,14 @@ def main() -> None:
         perfect = rows.get("perfect")
         for row in rows.values():
             row["same_as_perfect"] = perfect is not None and ended(row) == ended(perfect)
+            row["pose_difference_m"] = pose_difference(row, perfect) if perfect else None
         if args.plots:
             args.plots.mkdir(parents=True, exist_ok=True)
             curves = {name: tuple(map(np.array, row["curve"])) for name, row in rows.items()}
             title = f"{robots} robots: mean share of all submaps held"
             plot_completeness(curves, args.plots / f"completeness_{robots}_robots.png", title)
         for row in rows.values():
-            del row["held"], row["curve"]
+            del row["held"], row["curve"], row["kept"], row["poses"]
         out[f"{robots}_robots"] = rows
     print(json.dumps(out, indent=1))
 
