@@ -67,12 +67,12 @@ class Received:
 
 def received(sock: socket.socket) -> Received:
     """The packets ``sock`` received and their bytes with headers; nothing where the kernel
-    does not say (not Linux, or older than 4.19)."""
+    does not say (not Linux, or older than 4.2)."""
     try:
         info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 232)
     except (OSError, AttributeError):
         return Received()
-    if len(info) < 208:
+    if len(info) < 144:
         return Received()
     (payload,) = struct.unpack_from("Q", info, 128)  # tcpi_bytes_received
     (packets,) = struct.unpack_from("I", info, 140)  # tcpi_segs_in
@@ -91,7 +91,8 @@ def _dup(sock) -> socket.socket:
 
 
 class Relay:
-    """A shaping, counting TCP relay from ``127.0.0.1:port`` to ``target`` (host, port).
+    """A shaping, counting TCP relay from ``host:port`` (loopback by default) to ``target``
+    (host, port).
 
     Use as a context manager, or `start` and `close`. ``endpoint`` is the Zenoh endpoint to
     connect to. One event loop thread serves every connection; "forward" is what the
