@@ -54,8 +54,8 @@ def run_demo(
     if config.link.topology == "router":
         from gmmap.fleet.session import open_router
 
-        router, endpoint = open_router()
-        ports.append(int(endpoint.rsplit(":", 1)[1]))
+        ports.append(free_port())
+        router = open_router(ports[-1])
     relays = _start_relays(config, ports)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
@@ -122,9 +122,11 @@ def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dic
         a, b = names[i], names[j] if j < len(names) else "router"
         for sender, receiver, d in ((a, b, c["forward"]), (b, a, c["backward"])):
             if sender in wire:  # the router is not among the robots
-                sent = zip(keys, (d.wire_bytes, d.packets, d.bytes, 0, d.chunks), strict=True)
-                for key, value in sent:
-                    wire[sender][key] += value
+                w = wire[sender]
+                w["bytes"] += d.wire_bytes
+                w["packets"] += d.packets
+                w["payload_bytes"] += d.bytes
+                w["chunks"] += d.chunks
             if receiver in wire:
                 wire[receiver]["received_bytes"] += d.wire_bytes
         links.append({

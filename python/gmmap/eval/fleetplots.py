@@ -20,24 +20,19 @@ from gmmap.fleet.store import Store
 DESCRIPTOR_BYTES = 1024  # a 256-float descriptor, as the paper's Fig. 9 adds to the GMM
 
 
-def arrival_times(stores: Mapping[str, Path]) -> dict[str, np.ndarray]:
-    """Per robot, the sorted Unix times its store took in each submap."""
-    out = {}
+def completeness(stores: Mapping[str, Path]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per robot, (seconds since the fleet's first submap, its share of all the submaps any
+    robot holds), one step per submap its store took in."""
+    times, every = {}, set()
     for name, path in stores.items():
         with Store(path, durable=False) as store:
-            out[name] = np.sort([r.received for r in store.submaps()])
-    return out
-
-
-def completeness(stores: Mapping[str, Path]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Per robot, (seconds since the fleet's first submap, share of all its submaps held)."""
-    times = arrival_times(stores)
-    with_any = [t for t in times.values() if len(t)]
-    if not with_any:
+            records = store.submaps()
+        times[name] = np.sort([r.received for r in records])
+        every.update((r.robot, r.seq) for r in records)
+    if not every:
         return {}
-    start = min(t[0] for t in with_any)
-    total = max(len(t) for t in times.values())  # one who holds all: the fleet's count
-    return {n: (t - start, np.arange(1, len(t) + 1) / total) for n, t in times.items()}
+    start = min(t[0] for t in times.values() if len(t))
+    return {n: (t - start, np.arange(1, len(t) + 1) / len(every)) for n, t in times.items()}
 
 
 def _pyplot():

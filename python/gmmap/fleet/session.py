@@ -56,15 +56,15 @@ def open_session(robot: str, options: TransportOptions) -> tuple[zenoh.Session, 
     raise AssertionError("unreachable")
 
 
-def open_router(host: str = "127.0.0.1") -> tuple[zenoh.Session, str]:
-    """A Zenoh session in router mode listening on a free loopback port, and its endpoint:
-    robots in client mode connect to it and it routes between them."""
-    endpoint = f"tcp/{host}:{free_port(host)}"
+def open_router(port: int, host: str = "127.0.0.1") -> zenoh.Session:
+    """A Zenoh session in router mode listening on ``host:port``: robots in client mode
+    connect to it and it routes between them."""
+    endpoint = f"tcp/{host}:{port}"
     cfg = zenoh.Config()
     for key, value in (("mode", "router"), ("listen/endpoints", [endpoint]),
                        ("scouting/multicast/enabled", False)):  # fmt: skip
         cfg.insert_json5(key, json.dumps(value))
     try:
-        return zenoh.open(cfg), endpoint
+        return zenoh.open(cfg)
     except zenoh.ZError as err:
         raise TransportError(f"cannot open a Zenoh router on {endpoint}: {err}") from err
