@@ -339,10 +339,6 @@ class RobotNode:
             except Exception:
                 log.exception("%s: fetching %s failed", self.robot, sorted(joined | wanted))
 
-    def _catch_up(self) -> None:
-        for peer in self.transport.peers():
-            self.fetch_queue.put(peer)
-
     def _fetch_for(self, peers: set[str]) -> None:
         """Fetch what we miss of ``peers`` and of every other robot we know (its owner answers,
         or, when the owner is away, whoever holds it), and of robots no one has named."""
