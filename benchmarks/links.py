@@ -5,7 +5,10 @@ separate processes) with one counting relay between every two linked robots
 (`gmmap.fleet.links`): perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss
 (a 0.2 s TCP stall per lost chunk), two partitions of 30 s, a chain (robot i linked to
 i + 1 only: the others' submaps go through the robots in between) and a router (every robot
-a Zenoh client of one router, linked to it alone). Per case: submaps lost
+a Zenoh client of one router, linked to it alone), rendezvous links (up only while two
+robots are within 8 m, or in line of sight, the robots moving in step at twice their speed;
+`gmmap.fleet.links.Rendezvous`) and perfect links with robot 1 killed with SIGKILL after its
+third submap and restarted on its store. Per case: submaps lost
 (built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
@@ -13,8 +16,9 @@ whether the robots end holding the same submaps, groups and pose-graph matches a
 perfect links, and how far apart their optimised anchors end (m). Also the
 bytes and packets an idle link between two robots carries per minute. With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
-(``completeness_<n>_robots.png``). Rendezvous links are not among the cases; kill -9 and
-restart is `tests/test_crash.py`.
+(``completeness_<n>_robots.png``). On rendezvous links a robot that ends out of everyone's
+reach keeps its last submaps (they would go at the next meeting) and the others wait for it
+until the deadline (30 s): those submaps count as lost, and the robots end incomplete.
 
     .venv/bin/python benchmarks/links.py [--robots 3,5] [--cases perfect,10k,...] [--plots DIR]
 """
@@ -45,14 +49,23 @@ CASES = {
     "partitions_2x30s": LinkOptions(outages=((5.0, 35.0), (45.0, 75.0))),
     "chain": LinkOptions(topology="chain"),
     "router": LinkOptions(topology="router"),
+    "rendezvous_8m": LinkOptions(range_m=8.0),
+    "rendezvous_sight": LinkOptions(line_of_sight=True),
+    "kill_9": LinkOptions(emulate=True),
 }
+CRASH = {"kill_9": (1, 3)}  # robot 1 killed after its third submap, restarted on its store
+# Robots that drove apart wait for each other until the deadline: on rendezvous links, the
+# deadline is the end of the run.
+RENDEZVOUS_DEADLINE_S = 30.0
 
 
-def case(robots: int, link: LinkOptions) -> dict:
-    base = Config(sim=SimOptions(robots=robots), robot=RobotOptions(linger=2.0, deadline=180.0))
+def case(robots: int, name: str) -> dict:
+    link = CASES[name]
+    deadline = RENDEZVOUS_DEADLINE_S if link.rendezvous else 180.0
+    base = Config(sim=SimOptions(robots=robots), robot=RobotOptions(linger=2.0, deadline=deadline))
     config = backend_follows_drift(replace(base, link=link))
     with tempfile.TemporaryDirectory() as out:
-        r = run_demo(config, None, Path(out), lambda m: None)
+        r = run_demo(config, None, Path(out), lambda m: None, CRASH.get(name))
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     return {
@@ -67,7 +80,9 @@ def case(robots: int, link: LinkOptions) -> dict:
         "held": {n: rep["held"] for n, rep in reports.items()},
         "kept": {n: sorted(_kept(rep)) for n, rep in reports.items()},
         "poses": {n: rep["poses"] for n, rep in reports.items()},
-    }
+        **({"restarted_reloaded": reports[f"robot_{CRASH[name][0]}"]["reloaded"]}
+           if name in CRASH else {}),
+    }  # fmt: skip
 
 
 def _kept(report: dict) -> list[tuple]:
@@ -148,7 +163,7 @@ def main() -> None:
         rows = {}
         for name in args.cases.split(","):
             print(f"{robots} robots, {name}", file=sys.stderr, flush=True)
-            rows[name] = case(robots, CASES[name])
+            rows[name] = case(robots, name)
             print(json.dumps(rows[name]), file=sys.stderr, flush=True)
         perfect = rows.get("perfect")
         for row in rows.values():

@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 import zenoh
 
+from gmmap.cli.demo import rendezvous
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.fleetplots import completeness
 from gmmap.fleet.keys import free_port
-from gmmap.fleet.links import HEADER_BYTES, ZENOH_NO_GOSSIP, LinkOptions, Relay
+from gmmap.fleet.links import HEADER_BYTES, ZENOH_NO_GOSSIP, LinkOptions, Relay, Rendezvous
+from gmmap.fleet.store import Store
 
 
 class _Echo(socketserver.BaseRequestHandler):
@@ -82,6 +84,41 @@ def test_nothing_crosses_during_an_outage(echo) -> None:
     assert back == b"ping" and elapsed >= 0.7
 
 
+def test_nothing_crosses_while_the_gate_is_closed(echo) -> None:
+    """A rendezvous link apart: the bytes wait, and go once the robots meet again."""
+    opened = time.monotonic() + 0.6
+    with Relay(echo, gate=lambda: time.monotonic() >= opened) as relay:
+        back, elapsed = round_trip(relay, b"ping")
+    assert back == b"ping" and elapsed >= 0.5
+
+
+def test_rendezvous_follows_where_the_robots_are() -> None:
+    """In reach within the range and, with a sight test, only where nothing is in between;
+    the robots move one frame per second of the clock, and a robot past its last frame stays
+    where it ended."""
+    now = [0.0]
+    tracks = [np.array([[0.0, 0, 0], [0, 0, 0]]), np.array([[10.0, 0, 0], [3, 0, 0], [4, 0, 0]])]
+    reach = Rendezvous(tracks, range_m=5.0, start=0.0, fps=1.0, clock=lambda: now[0])
+    assert not reach.up(0, 1) and reach.frame() == 0
+    now[0] = 1.5
+    assert reach.up(0, 1) and reach.gate(0, 1)()
+    now[0] = 9.0  # robot 0 ended at frame 1, robot 1 at frame 2, 4 m apart
+    assert reach.frame() == 9 and reach.up(0, 1)
+    assert not reach.up(0, 1, frame=0)
+    wall = Rendezvous(tracks, range_m=None, sight=lambda a, b: a[0] == b[0], clock=lambda: 1.0)
+    assert not wall.up(0, 1)
+
+
+def test_the_office_walls_block_the_line_of_sight() -> None:
+    from gmmap.io.sim import get_world
+
+    office = get_world("office")
+    lo, hi = office.bounds()
+    inside = (lo + hi) / 2
+    assert office.in_sight(inside, inside)
+    assert not office.in_sight(lo - 1.0, hi + 1.0)  # through every wall in between
+
+
 def test_loss_is_a_stall_not_missing_bytes(echo) -> None:
     payload = bytes(range(256)) * 100
     with Relay(echo, LinkOptions(rate=200_000, loss=0.3, stall_s=0.01, seed=3)) as relay:
@@ -99,6 +136,8 @@ def test_bad_shapes_are_refused() -> None:
         dict(delay_s=-1.0),
         dict(loss=1.0),
         dict(outages=((2.0, 1.0),)),
+        dict(range_m=0.0),
+        dict(range_m=5.0, topology="router"),
     ):
         with pytest.raises(InvalidInputError):
             LinkOptions(**bad)
@@ -164,6 +203,32 @@ def test_robots_behind_500_bytes_per_second_deliver_everything(tmp_path):
         assert wire["received_bytes"] > r["bytes_received"][name] > 0
     assert r["lost"] == {"robot_0": 0, "robot_1": 0}
     assert r["wire_bytes_per_delivered_submap"] > r["bytes_per_submap"]["wire"]
+    for name in r["received"]:  # each ended because the other held everything, not by deadline
+        assert json.loads((tmp_path / f"{name}.json").read_text())["complete"], name
+
+
+def test_a_rendezvous_link_delivers_the_backlog_when_the_robots_meet(tmp_path) -> None:
+    """Robots 0 and 1 start 8.5 m apart and come within 8 m after about 45 frames: each has
+    built two submaps by then, kept them, and delivers them once the link is up."""
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
+         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
+         "--link-range", "8", "--max-frames", "120", "--deadline", "60"],
+        capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    config = load_config(tmp_path / "robot_0.yaml")
+    assert config.robot.wait_for == ()  # apart at the start
+    assert r["lost"] == {"robot_0": 0, "robot_1": 0}
+    reach = rendezvous(config, 120)
+    met = next(k for k in range(120) if reach.up(0, 1, frame=k))
+    assert met >= 40, met  # two submaps of 20 frames each built apart
+    with Store(tmp_path / "robot_1.sqlite", durable=False) as store:
+        when = {(x.robot, x.seq): x.received for x in store.submaps()}
+    assert when[("robot_0", 0)] >= config.sim.start + met / (config.sim.rate * config.sim.pace)
+    for name in r["received"]:
+        assert json.loads((tmp_path / f"{name}.json").read_text())["complete"], name
 
 
 def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:

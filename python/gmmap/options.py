@@ -337,7 +337,9 @@ class RobotOptions:
     then it stays until the peers in reach hold what it holds and it holds what they hold, or
     until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
     ``rejudge``: at the end, every pair held is judged again in one call, so that the final
-    maps are an offline merge's of the same submaps, whatever order they arrived in."""
+    maps are an offline merge's of the same submaps, whatever order they arrived in.
+    ``budget``: bytes/s of payload and keys the robot puts on each link, submaps, adverts and
+    fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap."""
 
     name: str = "robot"
     fleet: str = "gmmap"
@@ -347,8 +349,11 @@ class RobotOptions:
     linger: float = 5.0
     deadline: float = 120.0
     rejudge: bool = True
+    budget: float | None = None
 
     def __post_init__(self) -> None:
+        if self.budget is not None and not (math.isfinite(self.budget) and self.budget > 0):
+            raise InvalidInputError(f"robot.budget must be > 0 bytes/s or null, got {self.budget}")
         check_name("robot.name", self.name)
         check_name("robot.fleet", self.fleet)
         for peer in self.wait_for:
@@ -397,6 +402,9 @@ class LinkOptions:
     between every two robots; ``chain``, robot i linked to i + 1 only, so that the others'
     submaps reach a robot only through those in between; ``router``, every robot a Zenoh
     client of one Zenoh router, linked to it alone (the topology of larger fleets).
+
+    Rendezvous links (mesh or chain, simulated robots): a link is up only while its robots are
+    within ``range_m`` metres and, with ``line_of_sight``, nothing of the world stands between.
     """
 
     emulate: bool = False
@@ -407,10 +415,16 @@ class LinkOptions:
     outages: tuple[tuple[float, float], ...] = ()
     seed: int = 0
     topology: str = "mesh"
+    range_m: float | None = None
+    line_of_sight: bool = False
 
     def __post_init__(self) -> None:
         if self.topology not in TOPOLOGIES:
             raise InvalidInputError(f"link.topology must be one of {TOPOLOGIES}")
+        if self.range_m is not None and not (math.isfinite(self.range_m) and self.range_m > 0):
+            raise InvalidInputError(f"link.range_m must be > 0 m or null, got {self.range_m}")
+        if self.rendezvous and self.topology == "router":
+            raise InvalidInputError("rendezvous links need link.topology mesh or chain")
         if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
             raise InvalidInputError(f"link.rate must be > 0 bytes/s or null, got {self.rate}")
         for name in ("delay_s", "stall_s"):
@@ -426,8 +440,13 @@ class LinkOptions:
     @property
     def shaped(self) -> bool:
         """Whether the robots talk through relays."""
-        shaping = self.rate or self.delay_s or self.loss or self.outages
+        shaping = self.rate or self.delay_s or self.loss or self.outages or self.rendezvous
         return self.emulate or bool(shaping) or self.topology != "mesh"
+
+    @property
+    def rendezvous(self) -> bool:
+        """Whether links are up only while their robots are in reach of each other."""
+        return self.range_m is not None or self.line_of_sight
 
     def pairs(self, n: int) -> list[tuple[int, int]]:
         """The linked pairs (i < j) of ``n`` robots; with a router, it is number n."""
@@ -449,7 +468,10 @@ class SimOptions:
     ``sensor``: a 16-beam 360° LiDAR, or a 60° depth camera ``width`` px wide (4:3), whose narrow
     views alias more. ``drift``: the simulated odometry's error per metre driven (and rad per rad
     turned; `gmmap.math.drift.Drift.per_metre`), which the robots never see. 320 px: the depth
-    demo at that width runs three robots in real time on two cores.
+    demo at that width runs three robots in real time on two cores. ``pace``: None, a robot
+    maps its frames as fast as it can; a number, frame k is due ``k / (rate * pace)`` s after
+    ``start`` (Unix time; None: when the robot starts), so that robots move in step as in the
+    field, however fast each maps (rendezvous links need it).
     """
 
     world: str = "office"  # a built-in world or a world .json file
@@ -463,8 +485,12 @@ class SimOptions:
     rate: float = 5.0  # frames per second
     speed: float = 0.5  # m/s
     drift: float = 0.02
+    pace: float | None = None
+    start: float | None = None
 
     def __post_init__(self) -> None:
+        if self.pace is not None and not (math.isfinite(self.pace) and self.pace > 0):
+            raise InvalidInputError(f"sim.pace must be > 0 or null, got {self.pace}")
         if self.sensor not in SENSORS:
             raise InvalidInputError(f"sim.sensor must be one of {SENSORS}, got {self.sensor!r}")
         if self.robots < 1 or self.width < 8 or self.beams < 1:

@@ -129,6 +129,12 @@ SIM_SETTINGS = (
     ),
     setting("--sim-width", "sim.width", "Depth camera image width (px, 4:3).", type=int),
     setting("--sim-drift", "sim.drift", "Simulated odometry error per metre.", type=float),
+    setting(
+        "--sim-pace",
+        "sim.pace",
+        "Frames due at this many times the simulated rate (unset: as fast as mapped).",
+        type=float,
+    ),
 )
 
 
@@ -144,6 +150,12 @@ MIN_MATCHES = setting(
     "backend.min_matches",
     "Consistent matches before two robots' maps join.",
     type=click.IntRange(min=1),
+)
+BUDGET = setting(
+    "--budget",
+    "robot.budget",
+    "Bytes/s of payload the robot puts on each link, newest submaps first.",
+    type=float,
 )
 MIN_CONFIDENCE = setting(
     "--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float

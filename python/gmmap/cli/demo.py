@@ -24,23 +24,41 @@ from pathlib import Path
 import click
 import numpy as np
 
-from gmmap.cli.common import MIN_MATCHES, as_json_option, config_option, log, setting, sim_settings
+from gmmap.cli.common import (
+    BUDGET,
+    MIN_MATCHES,
+    as_json_option,
+    config_option,
+    log,
+    setting,
+    sim_settings,
+)
 from gmmap.config import Config
 from gmmap.eval.fleetplots import DESCRIPTOR_BYTES
 from gmmap.options import TOPOLOGIES, SimOptions, drift_overrides
 
+RENDEZVOUS_PACE = 2.0  # the robots' pace on rendezvous links: twice as fast as they drive
+STARTUP_S = 3.0  # from launching the robot processes to their first frame, on rendezvous links
+
 
 def run_demo(
-    config: Config, max_frames: int | None = None, out: Path | None = None, log=print
+    config: Config,
+    max_frames: int | None = None,
+    out: Path | None = None,
+    log=print,
+    crash: tuple[int, int] | None = None,
 ) -> dict:
     """Runs ``config.sim.robots`` robot processes, each started with its own configuration
-    file (this tree with its name, store and endpoints), and summarises their reports."""
+    file (this tree with its name, store and endpoints), and summarises their reports.
+    ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
+    and started again on its store."""
     from gmmap.fleet.transport import free_port
 
     start = time.perf_counter()
     if out is None:
         out = Path(tempfile.mkdtemp(prefix="gmmap-demo-"))
     out.mkdir(parents=True, exist_ok=True)
+    config = paced(config)
     sim = config.sim
     names = [f"robot_{i}" for i in range(sim.robots)]
     for name in names:  # a demo starts afresh: robots would resume from an earlier run's stores
@@ -49,17 +67,19 @@ def run_demo(
     ports = [free_port() for _ in names]
     fleet = f"demo{os.getpid()}"
     config.save(out)
-    procs = []
+    procs: list[subprocess.Popen] = []
+    readers: list[threading.Thread] = []
     router = None
     if config.link.topology == "router":
         from gmmap.fleet.session import open_router
 
         ports.append(free_port())
         router = open_router(ports[-1])
-    relays = _start_relays(config, ports)
+    reach = rendezvous(config, max_frames)
+    relays = _start_relays(config, ports, reach)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
-        own = _robot_config(config, i, names, ports, fleet, out, relays)
+        own = _robot_config(config, i, names, ports, fleet, out, relays, reach)
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--config", str(own.save(out / f"{name}.yaml")), "--sim", "--sim-index", str(i),
@@ -70,12 +90,14 @@ def run_demo(
             cmd += ["--max-frames", str(max_frames)]
         if i == 0:  # the lowest name: the reference of whatever group it is in
             cmd += ["--map-png", str(out / "map.png")]
-        procs.append(
-            subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        )
-    readers = [threading.Thread(target=_relay, args=(p, log), daemon=True) for p in procs]
-    for t in readers:
-        t.start()
+        procs.append(_launch(cmd, log, readers))
+        if crash and crash[0] == i:
+            store = out / f"{name}.sqlite"
+            args = (procs, i, cmd, store, crash[1], log, readers)
+            crasher = threading.Thread(target=_crash, args=args)
+            crasher.start()
+    if crash:
+        crasher.join()
     codes = [p.wait() for p in procs]
     for t in readers:
         t.join(timeout=5)
@@ -89,6 +111,8 @@ def run_demo(
     truth = {n: json.loads((out / f"{n}.truth.json").read_text()) for n in names}
     report = summarise(reports, truth, sim)
     if relays:
+        from gmmap.eval.wire import wire_report
+
         report.update(wire_report(relays, names, report["received"]))
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
@@ -98,48 +122,45 @@ def run_demo(
     return report
 
 
-def _start_relays(config: Config, ports: list[int]) -> dict:
+def paced(config: Config) -> Config:
+    """With rendezvous links the robots move in step (`SimOptions.pace`, `RENDEZVOUS_PACE`
+    unless set), from a common start a moment from now, once the processes are up."""
+    sim = config.sim
+    if not config.link.rendezvous:
+        return config
+    pace = sim.pace or RENDEZVOUS_PACE
+    return replace(config, sim=replace(sim, pace=pace, start=time.time() + STARTUP_S))
+
+
+def rendezvous(config: Config, max_frames: int | None = None):
+    """With rendezvous links, who is in reach of whom (`gmmap.fleet.links.Rendezvous`), from
+    the simulated robots' true positions on the paced robots' clock; else None."""
+    from gmmap.fleet.links import Rendezvous
+    from gmmap.io.sim import simulate_options
+
+    link, sim = config.link, config.sim
+    if not link.rendezvous:
+        return None
+    run = simulate_options(sim, max_frames)
+    sight = run[0].world.in_sight if link.line_of_sight else None
+    tracks = [r.gt_poses[:, :3, 3] for r in run]
+    return Rendezvous(tracks, link.range_m, sight, sim.start, sim.rate * sim.pace)
+
+
+def _start_relays(config: Config, ports: list[int], reach=None) -> dict:
     """With emulated links, one relay per linked pair (i < j, `LinkOptions.pairs`) in front
-    of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it."""
+    of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it,
+    and with rendezvous links (``reach``) only while they are in reach of each other."""
     from gmmap.fleet.links import Relay
 
     if not config.link.shaped:
         return {}
     pairs = config.link.pairs(config.sim.robots)
-    return {(i, j): Relay(("127.0.0.1", ports[j]), config.link).start() for i, j in pairs}
-
-
-def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dict:
-    """What the relays carried: per robot the packets it put on its links and their bytes,
-    headers included (``bytes``), the payload under them (``payload_bytes``: Zenoh's framing,
-    keep-alives and queries, what the relay read), the bytes it took off them; per link each
-    direction; and the bytes per submap delivered to a peer."""
-    keys = ("bytes", "packets", "payload_bytes", "received_bytes", "chunks")
-    wire = {n: dict.fromkeys(keys, 0) for n in names}
-    links = []
-    for (i, j), relay in sorted(relays.items()):
-        c = relay.counts()
-        a, b = names[i], names[j] if j < len(names) else "router"
-        for sender, receiver, d in ((a, b, c["forward"]), (b, a, c["backward"])):
-            if sender in wire:  # the router is not among the robots
-                w = wire[sender]
-                w["bytes"] += d.wire_bytes
-                w["packets"] += d.packets
-                w["payload_bytes"] += d.bytes
-                w["chunks"] += d.chunks
-            if receiver in wire:
-                wire[receiver]["received_bytes"] += d.wire_bytes
-        links.append({
-            "robots": [a, b],
-            "bytes": [c["forward"].wire_bytes, c["backward"].wire_bytes],
-            "packets": [c["forward"].packets, c["backward"].packets],
-        })  # fmt: skip
-    delivered = sum(received.values())
-    total = sum(sum(link["bytes"]) for link in links)
     return {
-        "wire": wire,
-        "links": links,
-        "wire_bytes_per_delivered_submap": total / delivered if delivered else None,
+        (i, j): Relay(
+            ("127.0.0.1", ports[j]), config.link, gate=reach.gate(i, j) if reach else None
+        ).start()
+        for i, j in pairs
     }
 
 
@@ -151,9 +172,11 @@ def _robot_config(
     fleet: str,
     out: Path,
     relays: dict | None = None,
+    reach=None,
 ) -> Config:
     """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints (through
-    the ``relays`` where links are emulated)."""
+    the ``relays`` where links are emulated). It waits at the start for the robots linked
+    to it, on rendezvous links (``reach``) only for those in reach there."""
     from gmmap.fleet.links import ZENOH_NO_GOSSIP
 
     name = names[i]
@@ -161,12 +184,13 @@ def _robot_config(
         linked = sorted({j for pair in relays if i in pair for j in pair} - {i})
     else:  # every robot in reach, directly or through the router
         linked = [j for j in range(len(names)) if j != i]
+    waits = [j for j in linked if reach is None or reach.up(min(i, j), max(i, j), frame=0)]
     robot = replace(
         config.robot,
         name=name,
         fleet=fleet,
         store=str(out / f"{name}.sqlite"),
-        wait_for=tuple(names[j] for j in linked),
+        wait_for=tuple(names[j] for j in waits),
     )
     zenoh = dict(config.transport.zenoh_options)
     mode, listen = config.transport.mode, config.transport.listen
@@ -183,6 +207,38 @@ def _robot_config(
         zenoh_options=zenoh,
     )  # fmt: skip
     return replace(config, robot=robot, transport=transport)
+
+
+def _launch(cmd: list[str], log, readers: list[threading.Thread]) -> subprocess.Popen:
+    """A robot process, its output relayed to ``log`` by a thread added to ``readers``."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    readers.append(threading.Thread(target=_relay, args=(proc, log), daemon=True))
+    readers[-1].start()
+    return proc
+
+
+def _crash(procs: list, i: int, cmd: list[str], store: Path, after: int, log, readers) -> None:
+    """Kills robot i with SIGKILL once its store holds ``after`` submaps of its own, and
+    starts it again on that store (``procs[i]`` becomes the new process)."""
+    import signal
+    import sqlite3
+
+    name = f"robot_{i}"
+    while procs[i].poll() is None:
+        try:
+            with sqlite3.connect(f"file:{store}?mode=ro", uri=True, timeout=1) as db:
+                sql = "SELECT COUNT(*) FROM submaps WHERE robot = ? AND own = 1"
+                if db.execute(sql, (name,)).fetchone()[0] >= after:
+                    break
+        except sqlite3.Error:  # not created yet
+            pass
+        time.sleep(0.05)
+    else:
+        return  # it ended first
+    os.kill(procs[i].pid, signal.SIGKILL)
+    procs[i].wait()
+    log(f"{name}: killed with SIGKILL after {after} submaps; starting it again on its store")
+    procs[i] = _launch(cmd, log, readers)
 
 
 def _relay(proc: subprocess.Popen, log) -> None:
@@ -345,6 +401,7 @@ def format_report(r: dict) -> str:
 @sim_settings
 @MIN_MATCHES
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
+@BUDGET
 @setting(
     "--deadline",
     "robot.deadline",
@@ -363,6 +420,19 @@ def format_report(r: dict) -> str:
     "Which robots are linked: mesh (all pairs), chain (i to i + 1; the rest multi-hop) or "
     "router (each a Zenoh client of one router).",
     type=click.Choice(TOPOLOGIES),
+)
+@setting(
+    "--link-range",
+    "link.range_m",
+    "Rendezvous links: up only while their robots are this close (m); the robots move in "
+    "step (sim.pace, 2 unless set).",
+    type=float,
+)
+@setting(
+    "--link-sight",
+    "link.line_of_sight",
+    "Rendezvous links: up only while their robots see each other.",
+    is_flag=True,
 )
 @click.option("--max-frames", type=int, help="Use only each robot's first frames.")
 @click.option(

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import click
 
 from gmmap.cli.common import (
+    BUDGET,
     COVARIANCE,
     FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
@@ -46,6 +48,7 @@ from gmmap.config import Config
 @MIN_MATCHES
 @MIN_CONFIDENCE
 @setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
+@BUDGET
 @setting(
     "--deadline", "robot.deadline", "Latest end after mapping, peers complete or not.", type=float
 )
@@ -127,12 +130,15 @@ def _frames(data: Path | None, simulated: bool, index: int, stride: int | None, 
         raise click.UsageError("give exactly one of --data and --sim")
     if data is not None:
         return open_data(data, stride)
-    from gmmap.io.sim import simulate_options
+    from gmmap.io.sim import Paced, simulate_options
 
-    run = simulate_options(config.sim)
+    sim = config.sim
+    run = simulate_options(sim)
     if not 0 <= index < len(run):
         raise click.BadParameter(f"0..{len(run) - 1}", param_hint="--sim-index")
-    return run[index]
+    if sim.pace is None:
+        return run[index]
+    return Paced(run[index], sim.pace, time.time() if sim.start is None else sim.start)
 
 
 def save_map(gmap, path: Path) -> dict:

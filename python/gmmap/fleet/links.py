@@ -6,7 +6,8 @@ partitions are done here, in the application. A robot connects to the relay's en
 of its peer's; the relay forwards both directions. Over TCP a lost segment is never missing
 bytes, it is a retransmission stall, so ``loss`` holds a chunk back for ``stall_s`` with that
 probability. During an outage no byte moves either way; the connections stay open (as a radio
-out of range leaves them), and Zenoh's lease decides when a peer is gone.
+out of range leaves them), and Zenoh's lease decides when a peer is gone. A rendezvous link
+(`Rendezvous`) is the same outage, for as long as its two robots are out of each other's reach.
 
 What the relay counts is all that Zenoh put on the socket: its framing, keep-alives, liveliness
 and queries included, and, from the kernel's own counts of its sockets (``TCP_INFO``), the
@@ -31,8 +32,11 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import TracebackType
+
+import numpy as np
 
 from gmmap.options import LinkOptions
 
@@ -43,6 +47,7 @@ BUFFER = 8  # chunks in flight per direction before the relay stops reading (bac
 HEADER_BYTES = 14 + 20 + 20  # per packet: Ethernet, IPv4 and TCP without options
 TIMESTAMP_BYTES = 12  # the TCP timestamp option, padded, on every packet once negotiated
 _TCPI_OPT_TIMESTAMPS = 1
+GATE_POLL_S = 0.1  # how often a closed rendezvous link looks again
 
 
 @dataclass
@@ -105,9 +110,11 @@ class Relay:
         shape: LinkOptions | None = None,
         port: int = 0,
         host: str = "127.0.0.1",
+        gate: Callable[[], bool] | None = None,
     ):
         self.target = target
         self.shape = shape or LinkOptions()
+        self.gate = gate  # while it says False, nothing crosses (a rendezvous link apart)
         self._port, self._host = port, host
         self._rng = random.Random(self.shape.seed)
         self._dirs = {"forward": _Direction(), "backward": _Direction()}
@@ -257,13 +264,65 @@ class Relay:
             await writer.drain()
 
     async def _wait_until(self, due: float) -> None:
-        """Sleeps until ``due`` (monotonic) and then past any outage under way."""
+        """Sleeps until ``due`` (monotonic) and then past any outage under way, and while the
+        gate is closed."""
         while True:
             now = time.monotonic()
             if now < due:
                 await asyncio.sleep(due - now)
                 continue
             end = self.shape.outage_end(now - self._t0)
-            if end is None:
+            if end is not None:
+                await asyncio.sleep(self._t0 + end - now)
+            elif self.gate is not None and not self.gate():
+                await asyncio.sleep(GATE_POLL_S)
+            else:
                 return
-            await asyncio.sleep(self._t0 + end - now)
+
+
+Sight = Callable[[np.ndarray, np.ndarray], bool]
+
+
+class Rendezvous:
+    """Which robots are in reach of each other, from where each is: within ``range_m`` (None:
+    any distance) and, where ``sight`` is given, in its line of sight (``sight(a, b)``: no
+    obstacle between positions a and b).
+
+    ``tracks[i]`` holds robot i's positions (N, 3), one per frame; frame k is where the robots
+    are ``k / fps`` s after ``start`` on ``clock`` (the robots' frames paced so, `SimOptions.pace`),
+    and after its last frame a robot stays where it ended. `gate` is a `Relay`'s gate.
+    """
+
+    def __init__(
+        self,
+        tracks: list[np.ndarray],
+        range_m: float | None,
+        sight: Sight | None = None,
+        start: float = 0.0,
+        fps: float = 1.0,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self._tracks = [np.asarray(t, float).reshape(-1, 3) for t in tracks]
+        self._range, self._sight = range_m, sight
+        self._start, self._fps, self._clock = start, fps, clock
+        self._lock = threading.Lock()
+        self._memo: dict[tuple, bool] = {}
+
+    def frame(self) -> int:
+        """The frame the robots are at now."""
+        return max(0, int((self._clock() - self._start) * self._fps))
+
+    def up(self, i: int, j: int, frame: int | None = None) -> bool:
+        """Whether robots i and j are in reach at ``frame`` (None: now)."""
+        k = self.frame() if frame is None else frame
+        ki, kj = (min(k, len(self._tracks[r]) - 1) for r in (i, j))
+        key = (i, ki, j, kj)
+        with self._lock:
+            if key not in self._memo:
+                a, b = self._tracks[i][ki], self._tracks[j][kj]
+                near = self._range is None or float(np.linalg.norm(a - b)) <= self._range
+                self._memo[key] = near and (self._sight is None or self._sight(a, b))
+            return self._memo[key]
+
+    def gate(self, i: int, j: int) -> Callable[[], bool]:
+        return lambda: self.up(i, j)

@@ -2,9 +2,10 @@
 
 Stages, each a thread:
 
-- **construction**: frames → `SubmapBuilder` → `gmmap.encode` → own store → publish (kind
-  "submap"). The node works on what it sent: the decoded copy of its own submap, the same bytes
-  every other robot sees, goes on to matching. Each built submap is also given to ``on_built``
+- **construction**: frames → `SubmapBuilder` → `gmmap.encode` → own store → outbox (kind
+  "submap"; `gmmap.fleet.outbox`: sent in priority order within ``robot.budget``). The node
+  works on what it sent: the decoded copy of its own submap, the same bytes every other robot
+  sees, goes on to matching. Each built submap is also given to ``on_built``
   (a `Built` event: status lines, evaluation outside the node).
 - **matching**: the transport's subscription (and fetch replies) → inbox (`Arrived` events) →
   decode → store → `Mapper.add` (place recognition against the other robots' submaps held,
@@ -38,9 +39,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gmmap.config import Config
-from gmmap.errors import DecodeError, TransportError
+from gmmap.errors import DecodeError
 from gmmap.fleet import holdings
 from gmmap.fleet.codec import decode, encode
+from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of, match_of
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import Transport, TransportConfig
@@ -115,6 +117,9 @@ class RobotNode:
         self.transport = Transport(
             TransportConfig(config.robot.fleet, self.robot, config.transport)
         )
+        self.budget = Budget(config.robot.budget)
+        fleet = config.robot.fleet
+        self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
 
     # ---- persistence ------------------------------------------------------------------------
 
@@ -147,7 +152,7 @@ class RobotNode:
 
     def start(self) -> None:
         t = self.transport
-        t.serve(self.store.fetch_provider, self.store.robots)
+        t.serve(self.store.fetch_provider, self.store.robots, self.budget)
         t.subscribe(self._receive)
         t.on_join(self.fetch_queue.put)
         t.on_join(self.holdings.meet)
@@ -220,6 +225,7 @@ class RobotNode:
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
         self._advertise(self._held(), final=True)  # done: the peers need not wait for us
+        self.outbox.flush(timeout=max(5.0, seconds))
         if self.config.robot.rejudge and not self.stopping:
             if progress:
                 progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
@@ -232,14 +238,20 @@ class RobotNode:
 
     def _advertise(self, counts: dict[str, int], final: bool = False) -> None:
         self._told_at = time.monotonic()
-        with contextlib.suppress(TransportError):  # closing, or the link is gone: try later
-            self.transport.publish(holdings.KIND, self._adverts, holdings.encode(counts, final))
-            self._adverts += 1
+        self.outbox.put(holdings.KIND, self._adverts, holdings.encode(counts, final))
+        self._adverts += 1
+
+    def _publish(self, kind: str, seq: int, payload: bytes) -> None:
+        """The outbox's way out (its thread): a submap counts as sent once published."""
+        self.transport.publish(kind, seq, payload)
+        if kind == KIND:
+            self.counts["sent"] += 1
 
     def _idle(self) -> bool:
         with self._lock:
             busy = self._busy
         idle = self.inbox.empty() and self.fetch_queue.empty() and not self._changed.is_set()
+        idle = idle and not self.outbox.pending()
         return busy == 0 and idle
 
     def drain(self, timeout: float = 10.0) -> bool:
@@ -260,6 +272,7 @@ class RobotNode:
         self._changed.set()
         self.inbox.put(None)
         self.fetch_queue.put(None)
+        self.outbox.close()
         self.transport.close()
         for th in self._threads:
             if th is not threading.current_thread():
@@ -296,8 +309,7 @@ class RobotNode:
         self.frames_consumed = consumed
         self.counts["built"] += 1
         self.wire[s.seq] = _sizes(s, len(payload), s.n_points)
-        self.transport.publish(KIND, s.seq, payload)
-        self.counts["sent"] += 1
+        self.outbox.put(KIND, s.seq, payload)
         self._enqueue(Arrived("own", self.robot, s.seq, payload))
         if self.on_built is not None:
             try:

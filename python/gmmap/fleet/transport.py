@@ -21,23 +21,19 @@ Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each 
 
 - ``messages``, ``payload_bytes``: every message and its payload (the encoded submap), published
   or received by subscription, plus fetch replies served or received;
-- ``key_bytes``: the UTF-8 length of each message's key expression (the application-level
-  overhead of naming the message);
+- ``key_bytes``: the UTF-8 length of each message's key expression;
 - ``fetch_messages``, ``fetch_payload_bytes``: the part of the above that travelled as fetch
   replies.
 
-Not counted here: Zenoh's framing, TCP/IP headers, liveliness and query control traffic (the
-Python API does not expose them; `gmmap.fleet.links` counts them on a link). Received messages
-are counted once accepted (right fleet, another robot, well-formed key); dropped ones only
-increment ``ignored``.
+Not counted here: Zenoh's framing, TCP/IP headers, liveliness and queries (`gmmap.fleet.links`
+counts them on a link). Received messages count once accepted (right fleet, another robot,
+well-formed key); dropped ones only increment ``ignored``.
 
-Presence: a robot that closes its transport leaves at once; one that dies leaves when Zenoh's
-lease expires (10 s by default). Two live sessions with one robot name count as one robot (Zenoh
-merges identical tokens) and see each other's messages as their own: names must be unique.
+Presence: a robot that closes its transport leaves at once, one that dies when Zenoh's lease
+expires (10 s). Names must be unique: two sessions of one name count as one robot.
 
-Callbacks run on Zenoh's threads, which must never be blocked for long: they only parse, count and
-hand each event to a queue. One worker thread runs the user's message and join/leave callbacks in
-arrival order, another answers fetch queries, so a slow provider never delays messages.
+Zenoh's callback threads only parse, count and queue each event. One worker runs the message and
+join/leave callbacks in arrival order, another answers fetches: a slow provider delays nothing.
 """
 
 from __future__ import annotations
@@ -63,6 +59,7 @@ from gmmap.fleet.keys import (
     parse_data_key,
     parse_fetch,
 )
+from gmmap.fleet.outbox import Budget
 from gmmap.fleet.session import open_session
 from gmmap.fleet.worker import Worker, call_logged
 from gmmap.names import NAME_RE, check_name
@@ -141,6 +138,7 @@ class Transport:
         self._leave_callbacks: list[PeerCallback] = []
         self._provider: FetchProvider | None = None
         self._roster: Roster | None = None
+        self._budget = Budget(None)  # on fetch answers (`serve`)
         self._data_subscriber: Any = None
         self._queryable: Any = None
         self._probes: dict[str, zenoh.Publisher] = {}
@@ -323,18 +321,20 @@ class Transport:
 
     # ---- fetch ------------------------------------------------------------------------------
 
-    def serve(self, provider: FetchProvider, roster: Roster | None = None) -> None:
+    def serve(
+        self, provider: FetchProvider, roster: Roster | None = None, budget: Budget | None = None
+    ) -> None:
         """Answer other robots' fetch queries with ``provider(robot, kind, since_seq)``, which
         returns the ``(seq, payload)`` pairs held (own or received) with seq ≥ since_seq, and,
-        with ``roster()`` (the robots held), `fetch_unknown` queries. It runs on the
-        transport's query thread. Calling again replaces both."""
+        with ``roster()`` (the robots held), `fetch_unknown` queries, newest first, each reply
+        within ``budget``. It runs on the transport's query thread. Calling again replaces all."""
         self._check_open()
         if not callable(provider):
             raise TransportConfigError(f"provider must be callable; got {provider!r}")
         if roster is not None and not callable(roster):
             raise TransportConfigError(f"roster must be callable; got {roster!r}")
         with self._lock:
-            self._provider, self._roster = provider, roster
+            self._provider, self._roster, self._budget = provider, roster, budget or Budget(None)
         with self._declare_lock:
             if self._queryable is not None:
                 return
@@ -357,7 +357,7 @@ class Transport:
                 return
             _, robot, kind, since = request
             with self._lock:
-                provider, roster = self._provider, self._roster
+                provider, roster, budget = self._provider, self._roster, self._budget
             relayed = query.parameters.get("relay") == "1"
             if provider is None or self._closed or not self.answers_for(robot, relayed):
                 return
@@ -368,16 +368,16 @@ class Transport:
                     robots = sorted(set(roster() if roster else ()) - skip - {""})
                 else:
                     robots = [robot]
-                held = [(r, seq, p) for r in robots for seq, p in provider(r, kind, since)]
+                held = [(r, s, p) for r in robots for s, p in provider(r, kind, since)]
             except Exception as err:
                 log.exception("gmmap transport: fetch provider failed for %s/%s", robot, kind)
                 query.reply_err(f"provider failed: {err}".encode())
                 return
-            for r, seq, payload in held:
-                if not isinstance(seq, int) or seq < since:
-                    continue
-                data = _as_bytes(payload)
-                key = data_key(self.fleet, r, kind, seq)
+            held = [h for h in held if isinstance(h[1], int) and h[1] >= since]
+            for r, seq, payload in sorted(held, key=lambda h: -h[1]):  # `gmmap.fleet.outbox`
+                data, key = _as_bytes(payload), data_key(self.fleet, r, kind, seq)
+                if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
+                    return
                 query.reply(key, data)
                 self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
         finally:

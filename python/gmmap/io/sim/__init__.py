@@ -3,6 +3,7 @@
 from gmmap.io.sim.robots import Motion, route_poses
 from gmmap.io.sim.run import (
     UP,
+    Paced,
     SimRobot,
     simulate,
     simulate_options,
@@ -22,6 +23,7 @@ __all__ = [
     "DepthCamera",
     "Lidar",
     "Motion",
+    "Paced",
     "SimRobot",
     "World",
     "get_world",

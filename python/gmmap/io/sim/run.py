@@ -4,6 +4,7 @@ ground truth, and their own odometry (each in its own map frame, unknown to the 
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,6 +89,28 @@ class SimRobot(Sequence):
             self.odom_poses[i].copy(),
             self.gt_poses[i].copy(),
         )
+
+
+class Paced(Sequence):
+    """A robot's frames, each released once its stamp has come on the wall clock: frame k
+    ``(stamp_k - stamp_0) / pace`` s after ``start`` (Unix time). A frame asked for late is
+    released at once: a robot that maps slower than it moves falls behind, as on a robot."""
+
+    def __init__(self, robot: SimRobot, pace: float, start: float) -> None:
+        self.robot, self.pace, self.start = robot, pace, start
+
+    def __len__(self) -> int:
+        return len(self.robot)
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        i = range(len(self))[i]
+        stamps = self.robot.stamps
+        wait = self.start + (stamps[i] - stamps[0]) / self.pace - time.time()
+        if wait > 0:
+            time.sleep(wait)
+        return self.robot[i]
 
 
 OdometryModel = Callable[[np.ndarray, np.random.Generator], np.ndarray]

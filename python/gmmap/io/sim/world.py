@@ -67,6 +67,16 @@ class World:
             np.array(boxes, float).reshape(-1, 7), np.array(cyls, float).reshape(-1, 5)
         )
 
+    def in_sight(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether nothing of the world stands between points ``a`` and ``b``."""
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        gap = float(np.linalg.norm(b - a))
+        if gap == 0.0:
+            return True
+        origin = np.eye(4)
+        origin[:3, 3] = a
+        return bool(np.isnan(self.scene.ranges(origin, ((b - a) / gap)[None], gap)[0]))
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned (min, max) corners of all shapes."""
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)

@@ -1,0 +1,118 @@
+"""What a robot sends, in priority order and within its byte budget (`RobotOptions.budget`).
+
+The construction stage and the lingering node put messages here and never wait for the link;
+one sender thread publishes them. When the link (or the budget) is slower than the robot
+builds, messages wait here and leave in this order:
+
+1. adverts (`gmmap.fleet.holdings`): about 80 B each, and what tells the peers whether to wait;
+2. own submaps, newest first. Two robots that meet are near each other now, so their newest
+   submaps are the likeliest to overlap, verify and join their maps; the older ones follow
+   (a peer fills the gaps by fetching, `RobotNode._fetch`).
+
+The budget is a token bucket over the payload and key bytes of everything this robot puts on
+its links, fetch answers included (`Budget.take`, which `Transport.serve` calls too); Zenoh's
+framing and the TCP/IP headers come on top (see docs/benchmarks.md). In Zenoh's peer mode one
+publication goes to every peer, so the budget holds on each link.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from gmmap.errors import TransportError
+from gmmap.fleet.keys import data_key
+
+log = logging.getLogger(__name__)
+
+BURST_S = 1.0  # the bucket holds this many seconds of budget (and at least one message)
+Publish = Callable[[str, int, bytes], None]
+
+
+class Budget:
+    """A token bucket of ``rate`` bytes/s (None: unlimited), thread-safe."""
+
+    def __init__(self, rate: float | None) -> None:
+        self.rate = rate
+        self._lock = threading.Lock()
+        self._tokens = rate * BURST_S if rate else 0.0
+        self._at = time.monotonic()
+
+    def take(self, n: int, stopped: Callable[[], bool] = lambda: False) -> bool:
+        """Wait until ``n`` bytes may go and take them; False if ``stopped()`` first."""
+        if self.rate is None:
+            return True
+        cap = max(self.rate * BURST_S, float(n))
+        while not stopped():
+            with self._lock:
+                now = time.monotonic()
+                self._tokens = min(cap, self._tokens + (now - self._at) * self.rate)
+                self._at = now
+                if self._tokens >= n:
+                    self._tokens -= n
+                    return True
+                wait = (n - self._tokens) / self.rate
+            time.sleep(min(wait, 0.1))
+        return False
+
+
+class Outbox:
+    """Messages waiting to be published, ``urgent`` kind first (the adverts, oldest first),
+    then the rest newest first, sent by one thread through ``publish(kind, seq, payload)``
+    within ``budget``, each costing its payload and its key (``sender``: fleet, robot)."""
+
+    def __init__(self, publish: Publish, budget: Budget, urgent: str, sender: tuple[str, str]):
+        self._publish, self.budget = publish, budget
+        self._urgent, self._sender = urgent, sender
+        self._heap: list[tuple[tuple[int, int], str, int, bytes]] = []
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._sending = False
+        self._thread = threading.Thread(target=self._run, name="gmmap-outbox", daemon=True)
+        self._thread.start()
+
+    def put(self, kind: str, seq: int, payload: bytes) -> None:
+        rank = (0, seq) if kind == self._urgent else (1, -seq)
+        with self._cond:
+            heapq.heappush(self._heap, (rank, kind, seq, payload))
+            self._cond.notify()
+
+    def pending(self) -> int:
+        """Messages queued or being sent."""
+        with self._cond:
+            return len(self._heap) + self._sending
+
+    def flush(self, timeout: float) -> bool:
+        """Wait until everything queued is sent (True) or ``timeout`` s pass."""
+        deadline = time.monotonic() + timeout
+        while self.pending() and time.monotonic() < deadline and not self._stop.is_set():
+            time.sleep(0.02)
+        return not self.pending()
+
+    def close(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._heap and not self._stop.is_set():
+                    self._cond.wait()
+                if self._stop.is_set():
+                    return
+                _, kind, seq, payload = heapq.heappop(self._heap)
+                self._sending = True
+            try:
+                key = data_key(*self._sender, kind, seq).encode()
+                if self.budget.take(len(payload) + len(key), self._stop.is_set):
+                    self._publish(kind, seq, payload)
+            except TransportError as err:  # closing, or the link is gone: the store keeps it
+                log.debug("not sent %s/%d: %s", kind, seq, err)
+            finally:
+                with self._cond:
+                    self._sending = False

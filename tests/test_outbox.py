@@ -1,0 +1,82 @@
+"""The outbox (`gmmap.fleet.outbox`): priority order and the byte budget."""
+
+import threading
+import time
+
+import pytest
+
+from gmmap.errors import InvalidInputError, TransportError
+from gmmap.fleet.keys import data_key
+from gmmap.fleet.outbox import Budget, Outbox
+from gmmap.options import RobotOptions
+
+SENDER = ("fleet", "r")
+
+
+def test_a_backlog_leaves_adverts_first_then_the_newest_submaps() -> None:
+    gate, sent = threading.Event(), []
+
+    def publish(kind: str, seq: int, payload: bytes) -> None:
+        gate.wait(5)  # the link is busy until the backlog is queued
+        sent.append((kind, seq))
+
+    box = Outbox(publish, Budget(None), "have", SENDER)
+    box.put("submap", 0, b"x")  # taken at once, held up by the busy link
+    time.sleep(0.05)
+    for seq in (1, 2, 3):
+        box.put("submap", seq, b"x")
+    box.put("have", 0, b"{}")
+    box.put("have", 1, b"{}")
+    assert box.pending() == 6
+    gate.set()
+    assert box.flush(5)
+    box.close()
+    assert sent == [("submap", 0), ("have", 0), ("have", 1), ("submap", 3), ("submap", 2),
+                    ("submap", 1)]  # fmt: skip
+
+
+def test_the_budget_holds_payload_and_keys() -> None:
+    """2,000 B/s with a second of burst: 10 messages of 500 B and their keys take more than
+    1.5 s, and each one's cost is its payload plus its key."""
+    costs: list[int] = []
+    budget = Budget(2000.0)
+    take = budget.take
+    budget.take = lambda n, stopped=lambda: False: costs.append(n) or take(n, stopped)
+    box = Outbox(lambda kind, seq, payload: None, budget, "have", SENDER)
+    start = time.monotonic()
+    for seq in range(10):
+        box.put("submap", seq, b"x" * 500)
+    assert box.flush(10)
+    elapsed = time.monotonic() - start
+    box.close()
+    key = len(data_key(*SENDER, "submap", 9))
+    assert costs[0] == 500 + key and len(costs) == 10
+    assert elapsed >= (sum(costs) - 2000) / 2000 - 0.1
+
+
+def test_a_closed_budget_wait_gives_up() -> None:
+    budget = Budget(10.0)
+    assert budget.take(10)
+    assert not budget.take(1000, stopped=lambda: True)
+
+
+def test_a_failed_publish_is_dropped_and_the_rest_go() -> None:
+    sent = []
+
+    def publish(kind: str, seq: int, payload: bytes) -> None:
+        if seq == 1:
+            raise TransportError("the link is gone")
+        sent.append(seq)
+
+    box = Outbox(publish, Budget(None), "have", SENDER)
+    for seq in range(3):
+        box.put("submap", seq, b"x")
+    assert box.flush(5)
+    box.close()
+    assert sorted(sent) == [0, 2]
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0, float("nan"), float("inf")])
+def test_a_bad_budget_is_refused(bad: float) -> None:
+    with pytest.raises(InvalidInputError):
+        RobotOptions(budget=bad)
