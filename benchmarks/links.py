@@ -8,7 +8,9 @@ i + 1 only: the others' submaps go through the robots in between) and a router (
 a Zenoh client of one router, linked to it alone), rendezvous links (up only while two
 robots are within 8 m, or in line of sight, the robots moving in step at twice their speed;
 `gmmap.fleet.links.Rendezvous`) and perfect links with robot 1 killed with SIGKILL after its
-third submap and restarted on its store. Per case: submaps lost
+third submap and restarted on its store, and perfect links over the first 100 frames (the
+difference to the whole run is what one more delivered submap costs on the wire, the
+sessions' set-up and the ending apart). Per case: submaps lost
 (built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
@@ -52,8 +54,12 @@ CASES = {
     "rendezvous_8m": LinkOptions(range_m=8.0),
     "rendezvous_sight": LinkOptions(line_of_sight=True),
     "kill_9": LinkOptions(emulate=True),
+    "perfect_100_frames": LinkOptions(emulate=True),
 }
 CRASH = {"kill_9": (1, 3)}  # robot 1 killed after its third submap, restarted on its store
+# The same perfect links over the first 100 frames only: what the rest of the run adds per
+# submap is the cost of one more submap, once the sessions are set up.
+FRAMES = {"perfect_100_frames": 100}
 # Robots that drove apart wait for each other until the deadline: on rendezvous links, the
 # deadline is the end of the run.
 RENDEZVOUS_DEADLINE_S = 30.0
@@ -65,7 +71,7 @@ def case(robots: int, name: str) -> dict:
     base = Config(sim=SimOptions(robots=robots), robot=RobotOptions(linger=2.0, deadline=deadline))
     config = backend_follows_drift(replace(base, link=link))
     with tempfile.TemporaryDirectory() as out:
-        r = run_demo(config, None, Path(out), lambda m: None, CRASH.get(name))
+        r = run_demo(config, FRAMES.get(name), Path(out), lambda m: None, CRASH.get(name))
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     return {
@@ -75,6 +81,8 @@ def case(robots: int, name: str) -> dict:
         "complete": all(rep["complete"] for rep in reports.values()),
         "wall_s": round(r["wall_s"], 1),
         "wire_bytes_per_delivered_submap": r["wire_bytes_per_delivered_submap"],
+        "wire_bytes": sum(sum(link["bytes"]) for link in r["links"]),
+        "delivered": sum(r["received"].values()),
         "payload_bytes_per_submap": r["bytes_per_submap"]["wire"],
         "groups": r["groups"],
         "held": {n: rep["held"] for n, rep in reports.items()},
@@ -145,6 +153,15 @@ def idle(seconds: float) -> dict:
     }
 
 
+def marginal(rows: dict) -> float | None:
+    """The bytes on the wire one more delivered submap costs: between the run over the first
+    100 frames and the whole run, on perfect links."""
+    full, short = rows.get("perfect"), rows.get("perfect_100_frames")
+    if not full or not short or full["delivered"] <= short["delivered"]:
+        return None
+    return (full["wire_bytes"] - short["wire_bytes"]) / (full["delivered"] - short["delivered"])
+
+
 def ended(row: dict) -> tuple:
     """What the robots ended with: the submaps each held, the groups and the kept matches."""
     return row["held"], row["groups"], row["kept"]
@@ -166,6 +183,7 @@ def main() -> None:
             rows[name] = case(robots, name)
             print(json.dumps(rows[name]), file=sys.stderr, flush=True)
         perfect = rows.get("perfect")
+        out[f"{robots}_robots_marginal_wire_bytes_per_submap"] = marginal(rows)
         for row in rows.values():
             row["same_as_perfect"] = perfect is not None and ended(row) == ended(perfect)
             row["pose_difference_m"] = pose_difference(row, perfect) if perfect else None

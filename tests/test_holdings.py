@@ -49,3 +49,25 @@ def test_lacking_names_the_peers_that_differ_present_or_gone_without_a_final_adv
     h.meet("d")  # met, then gone before it said anything: waited for
     assert h.lacking(mine, []) == {"d": {"they_lack": -1, "we_lack": -1}}
     assert describe(h.lacking(mine, [])) == "d (no advert yet)"
+
+
+def test_a_stream_of_arrivals_is_one_advert() -> None:
+    """News goes out once quiet for SETTLE_S, or after MAX_UNTOLD_S untold, or every
+    ADVERT_EVERY_S in any case."""
+    from gmmap.fleet.holdings import ADVERT_EVERY_S, MAX_UNTOLD_S, SETTLE_S, advert_due
+
+    assert not advert_due(10.0, True, changed=9.5, untold=9.0, told_at=9.0)  # still arriving
+    assert advert_due(10.0, True, changed=10.0 - SETTLE_S, untold=9.0, told_at=9.0)
+    assert advert_due(10.0, True, changed=10.0, untold=10.0 - MAX_UNTOLD_S, told_at=9.0)
+    assert not advert_due(10.0, False, changed=0.0, untold=0.0, told_at=9.0)  # nothing new
+    assert advert_due(10.0, False, changed=0.0, untold=0.0, told_at=10.0 - ADVERT_EVERY_S)
+
+
+def test_a_peer_is_caught_up_on_its_first_advert_after_it_joined() -> None:
+    h = Holdings()
+    h.meet("a")
+    assert not h.caught_up("a")  # no advert yet: still to come
+    assert h.update("a", encode({"a": 3}))
+    assert h.caught_up("a") and not h.caught_up("a")
+    h.meet("a")  # it left and came back
+    assert h.update("a", encode({"a": 4})) and h.caught_up("a")

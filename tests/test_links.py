@@ -232,10 +232,12 @@ def test_a_rendezvous_link_delivers_the_backlog_when_the_robots_meet(tmp_path) -
 
 
 def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:
-    """The link is cut from 4 s to 16 s, long enough for Zenoh's lease to expire: each robot
-    sees the other leave without saying it is done and waits; both end holding everything."""
+    """The link is cut from 4 s to 16 s, long enough for a 10 s Zenoh lease to expire: each
+    robot sees the other leave without saying it is done and waits; both end holding
+    everything."""
     config = tmp_path / "outage.yaml"
-    config.write_text("link:\n  outages: [[4, 16]]\n")
+    lease = "transport:\n  zenoh_options:\n    transport/link/tx/lease: 10000\n"
+    config.write_text("link:\n  outages: [[4, 16]]\n" + lease)
     out = subprocess.run(
         [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
          "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",

@@ -187,7 +187,7 @@ def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
     try:
         b.start_frames(frames[0:2]).join()
         time.sleep(1.0)
-        b.fetch_queue.put("a")  # a fetch round, as a join of a would start
+        b.fetch_queue.put(("a",))  # a fetch, as an advert of a's would start
         assert a.drain(5) and b.drain(5)
         assert a.store.robots() == [] and a.counts["received"] == 0
         assert b.store.robots() == ["b"] and b.transport.peers() == []

@@ -4,7 +4,8 @@ The construction stage and the lingering node put messages here and never wait f
 one sender thread publishes them. When the link (or the budget) is slower than the robot
 builds, messages wait here and leave in this order:
 
-1. adverts (`gmmap.fleet.holdings`): about 80 B each, and what tells the peers whether to wait;
+1. adverts (`gmmap.fleet.holdings`): about 80 B each, and what tells the peers whether to wait
+   (only the latest waits: it says all the robot holds);
 2. own submaps, newest first. Two robots that meet are near each other now, so their newest
    submaps are the likeliest to overlap, verify and join their maps; the older ones follow
    (a peer fills the gaps by fetching, `RobotNode._fetch`).
@@ -75,8 +76,13 @@ class Outbox:
         self._thread.start()
 
     def put(self, kind: str, seq: int, payload: bytes) -> None:
+        """Queue a message; an urgent one replaces those of its kind still waiting (an advert
+        says all a robot holds: only the latest counts)."""
         rank = (0, seq) if kind == self._urgent else (1, -seq)
         with self._cond:
+            if kind == self._urgent:
+                self._heap = [m for m in self._heap if m[1] != kind]
+                heapq.heapify(self._heap)
             heapq.heappush(self._heap, (rank, kind, seq, payload))
             self._cond.notify()
 

@@ -12,10 +12,12 @@ Stages, each a thread:
   verification, a judged pair never registered again) → each judged pair stored as an edge.
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
-- **fetch**: on a peer's join, for every robot it knows of, fetch what it misses (from the
-  first gap, else from the latest seq + 1); it serves fetches from its store, so a robot that
-  was away catches up from whoever is present, and the submaps of a robot out of its reach
-  come through the robots in between (`Transport.answers_for`).
+- **fetch**: when a peer joins, each tells the other what it holds (an advert,
+  `gmmap.fleet.holdings`), and each fetches the robots the other's advert holds more of (from
+  the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
+  that was away catches up from whoever is present, and the submaps of a robot out of its
+  reach come through the robots in between (`Transport.answers_for`). Robots that meet fresh
+  hold nothing to fetch and send no query.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -99,8 +101,8 @@ class RobotNode:
         self.store = Store(path)
         self.mapper = Mapper(config)
         self.inbox: queue.Queue[Arrived | None] = queue.Queue()
-        # A peer that joined (str), robots a peer holds more of (tuple), None: stop.
-        self.fetch_queue: queue.Queue[str | tuple[str, ...] | None] = queue.Queue()
+        # Robots a peer holds more of, None: stop.
+        self.fetch_queue: queue.Queue[tuple[str, ...] | None] = queue.Queue()
         self._lock = threading.Lock()
         self._stopping = threading.Event()
         self._changed = threading.Event()  # the graph changed since the last optimisation
@@ -108,7 +110,7 @@ class RobotNode:
         self._busy = 0  # inbox items taken and not finished, and a running optimisation
         self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
         self.holdings = holdings.Holdings()  # what the peers say they hold
-        self._adverts, self._told_at = 0, 0.0
+        self._adverts, self._told_at, self._told = 0, 0.0, {}
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.wire: dict[int, dict] = {}  # own seq → bytes
@@ -154,8 +156,8 @@ class RobotNode:
         t = self.transport
         t.serve(self.store.fetch_provider, self.store.robots, self.budget)
         t.subscribe(self._receive)
-        t.on_join(self.fetch_queue.put)
         t.on_join(self.holdings.meet)
+        t.on_join(self._joined)
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
         for name, target in (
@@ -198,17 +200,19 @@ class RobotNode:
             return False
         start = time.monotonic()
         end = start + max(seconds, self.config.robot.deadline)
-        told, changed, advert, fetch, said = None, start, start, start, start
+        seen, changed, untold, fetch, said = None, start, start, start, start
         complete = False
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
             lacking = self.holdings.lacking(mine, self.transport.peers())
-            if mine != told:
-                told, changed = mine, now
-                advert = min(advert, max(now, self._told_at + holdings.SETTLE_S))
-            if now >= advert:
+            if mine != seen:
+                seen, changed = mine, now
+            if mine == self._told:
+                untold = now
+            asked = self._told_at < start or self.holdings.heard_at > self._told_at
+            news = mine != self._told and asked
+            if holdings.advert_due(now, news, changed, untold, self._told_at):
                 self._advertise(mine)
-                advert = now + holdings.ADVERT_EVERY_S
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
             if now >= start + seconds and settled and not lacking and self._idle():
@@ -237,9 +241,10 @@ class RobotNode:
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
     def _advertise(self, counts: dict[str, int], final: bool = False) -> None:
-        self._told_at = time.monotonic()
-        self.outbox.put(holdings.KIND, self._adverts, holdings.encode(counts, final))
-        self._adverts += 1
+        with self._lock:  # the lingering node and a peer's join both advertise
+            self._told, self._told_at = counts, time.monotonic()
+            seq, self._adverts = self._adverts, self._adverts + 1
+        self.outbox.put(holdings.KIND, seq, holdings.encode(counts, final))
 
     def _publish(self, kind: str, seq: int, payload: bytes) -> None:
         """The outbox's way out (its thread): a submap counts as sent once published."""
@@ -329,8 +334,21 @@ class RobotNode:
             with self._lock:
                 self._arrived.setdefault(robot, set()).add(seq)
             self._enqueue(Arrived("received", robot, seq, payload))
-        elif kind == holdings.KIND:
-            self.holdings.update(robot, payload)
+        elif kind == holdings.KIND and self.holdings.update(robot, payload):
+            if not self.holdings.caught_up(robot):  # only its first advert since it joined
+                return
+            wanted = holdings.wanted({robot: self.holdings.adverts()[robot]}, self._held())
+            if wanted:
+                self.fetch_queue.put(tuple(wanted))
+
+    def _joined(self, peer: str) -> None:
+        """A peer joined: tell it what we hold once its subscriber is surely declared."""
+        threading.Timer(holdings.SETTLE_S, self._tell, (time.monotonic(),)).start()
+
+    def _tell(self, joined: float) -> None:  # unless an advert reached it, or we hold nothing
+        held = self._held() if not self.stopping else {}
+        if any(held.values()) and self._told_at < joined + holdings.SETTLE_S / 2:
+            self._advertise(held)
 
     def _fetcher(self) -> None:
         while not self.stopping:
@@ -341,25 +359,11 @@ class RobotNode:
                     items.append(self.fetch_queue.get_nowait())
             if None in items:
                 return
-            joined = {i for i in items if isinstance(i, str)}  # a peer's join: a whole round
-            wanted = {r for i in items if isinstance(i, tuple) for r in i}  # named robots only
+            wanted = {r for i in items for r in i}
             try:
-                if joined:
-                    self._fetch_for(joined)
-                else:
-                    self._fetch(wanted - {self.robot})
+                self._fetch(wanted - {self.robot})
             except Exception:
-                log.exception("%s: fetching %s failed", self.robot, sorted(joined | wanted))
-
-    def _fetch_for(self, peers: set[str]) -> None:
-        """Fetch what we miss of ``peers`` and of every other robot we know (its owner answers,
-        or, when the owner is away, whoever holds it), and of robots no one has named."""
-        robots = (peers | set(self.store.robots())) - {self.robot}
-        self._fetch(robots)
-        # Robots no one present has named: those that left before we came.
-        for r, held in self.transport.fetch_unknown(robots | {self.robot}, KIND).items():
-            for seq, payload in held:
-                self._enqueue_fetched(r, seq, payload)
+                log.exception("%s: fetching %s failed", self.robot, sorted(wanted))
 
     def _fetch(self, robots: set[str]) -> None:
         for r in sorted(robots):

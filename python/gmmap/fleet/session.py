@@ -1,5 +1,12 @@
 """Opening the fleet transport's Zenoh session (`gmmap.fleet.transport`): the Zenoh configuration
 from `TransportOptions`, and the endpoint to listen on.
+
+The lease is 30 s, not Zenoh's 10 s: a session sends a keep-alive every lease / 4 when it has
+nothing else to send, and on a 500 B/s link Zenoh's default keep-alives take a fifth of it
+(docs/benchmarks.md, the idle link). An outage shorter than the lease is a stall the link
+resumes from, not a reconnection with its handshake and declarations; a robot that died
+silently is seen gone after 30 s, and a robot waits for such a peer anyway
+(`gmmap.fleet.holdings`). ``transport.zenoh_options`` can set another.
 """
 
 from __future__ import annotations
@@ -13,6 +20,8 @@ from gmmap.errors import TransportConfigError, TransportError
 from gmmap.fleet.keys import free_port
 from gmmap.options import TransportOptions
 
+LEASE = {"transport/link/tx/lease": 30_000}  # ms
+
 
 def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -> zenoh.Config:
     """The Zenoh configuration of a robot's session; `TransportConfigError` for a bad option."""
@@ -22,6 +31,7 @@ def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -
         "listen/endpoints": list(listen_endpoints),
         "connect/endpoints": list(options.connect),
         "scouting/multicast/enabled": options.multicast_scouting,
+        **LEASE,
     }
     entries.update(options.zenoh_options)
     for key, value in entries.items():
@@ -62,7 +72,7 @@ def open_router(port: int, host: str = "127.0.0.1") -> zenoh.Session:
     endpoint = f"tcp/{host}:{port}"
     cfg = zenoh.Config()
     for key, value in (("mode", "router"), ("listen/endpoints", [endpoint]),
-                       ("scouting/multicast/enabled", False)):  # fmt: skip
+                       ("scouting/multicast/enabled", False), *LEASE.items()):  # fmt: skip
         cfg.insert_json5(key, json.dumps(value))
     try:
         return zenoh.open(cfg)

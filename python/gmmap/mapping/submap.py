@@ -49,7 +49,10 @@ class Submap:
 
     ``points`` (the buffered voxel centroids, anchor frame) stay on the robot: they are for
     baselines and evaluation and are never sent. ``gt_anchor`` is the anchor's ground-truth pose
-    in the dataset's world frame when the frames carry one.
+    in the dataset's world frame when the frames carry one. ``stamps``: a built submap's are its
+    first and last frames' (one, for one frame), the anchor's and where it ends; the frames in
+    between would cost 4 bytes each on the wire and no receiver could use them, their poses
+    not being sent.
     """
 
     robot: str
@@ -204,7 +207,7 @@ class SubmapBuilder:
             self.robot,
             self.seq,
             self.anchor,
-            np.array(self.stamps),
+            np.array(self.stamps[:1] + self.stamps[1:][-1:]),  # first and last
             len(points),
             gmm,
             points,
