@@ -74,10 +74,12 @@ def case(robots: int, name: str) -> dict:
         r = run_demo(config, FRAMES.get(name), Path(out), lambda m: None, CRASH.get(name))
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
+    lost = sum(r["lost"].values())
     return {
-        "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1),
+        # None while some submap never reached some robot
+        "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1) if not lost else None,
         "curve": fleet_curve(curves),
-        "lost": sum(r["lost"].values()),
+        "lost": lost,
         "complete": all(rep["complete"] for rep in reports.values()),
         "wall_s": round(r["wall_s"], 1),
         "wire_bytes_per_delivered_submap": r["wire_bytes_per_delivered_submap"],

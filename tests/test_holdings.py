@@ -51,16 +51,13 @@ def test_lacking_names_the_peers_that_differ_present_or_gone_without_a_final_adv
     assert describe(h.lacking(mine, [])) == "d (no advert yet)"
 
 
-def test_a_stream_of_arrivals_is_one_advert() -> None:
-    """News goes out once quiet for SETTLE_S, or after MAX_UNTOLD_S untold, or every
-    ADVERT_EVERY_S in any case."""
-    from gmmap.fleet.holdings import ADVERT_EVERY_S, MAX_UNTOLD_S, SETTLE_S, advert_due
+def test_news_goes_at_most_once_a_second_and_anything_every_30_s() -> None:
+    from gmmap.fleet.holdings import ADVERT_EVERY_S, SETTLE_S, advert_due
 
-    assert not advert_due(10.0, True, changed=9.5, untold=9.0, told_at=9.0)  # still arriving
-    assert advert_due(10.0, True, changed=10.0 - SETTLE_S, untold=9.0, told_at=9.0)
-    assert advert_due(10.0, True, changed=10.0, untold=10.0 - MAX_UNTOLD_S, told_at=9.0)
-    assert not advert_due(10.0, False, changed=0.0, untold=0.0, told_at=9.0)  # nothing new
-    assert advert_due(10.0, False, changed=0.0, untold=0.0, told_at=10.0 - ADVERT_EVERY_S)
+    assert not advert_due(10.0, True, told_at=10.0 - SETTLE_S / 2)
+    assert advert_due(10.0, True, told_at=10.0 - SETTLE_S)
+    assert not advert_due(10.0, False, told_at=9.0)  # nothing new
+    assert advert_due(10.0, False, told_at=10.0 - ADVERT_EVERY_S)
 
 
 def test_a_peer_is_caught_up_on_its_first_advert_after_it_joined() -> None:

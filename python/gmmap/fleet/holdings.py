@@ -13,21 +13,17 @@ advert is ignored, never trusted.
 from __future__ import annotations
 
 import json
-import math
 import threading
-import time
 from collections.abc import Iterable, Mapping
 
 from gmmap.names import NAME_RE
 
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
-# the robot lingers, when it starts and then in answer to a peer's advert (only lingering peers
-# advertise, and only they need ours), each once what it holds has not changed for SETTLE_S (or
-# MAX_UNTOLD_S after it first changed); and again every ADVERT_EVERY_S in case one was lost.
-# Each advert costs about 80 B of payload and two packets per peer.
+# the robot lingers, whenever it changes, at most once per SETTLE_S (`advert_due`), and every
+# ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B of payload and two packets
+# per peer.
 SETTLE_S = 1.0
-MAX_UNTOLD_S = 5.0
 ADVERT_EVERY_S = 30.0
 FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
 PROGRESS_EVERY_S = 5.0
@@ -67,7 +63,6 @@ class Holdings:
         self._peers: dict[str, tuple[dict[str, int], bool]] = {}
         self._met: set[str] = set()
         self._fresh: set[str] = set()  # joined, and no advert from it since
-        self.heard_at = -math.inf  # when the latest advert came (monotonic s)
 
     def meet(self, peer: str) -> None:
         """A peer joined: from now on it is waited for until it says it is done."""
@@ -88,7 +83,6 @@ class Holdings:
         if advert is not None:
             with self._lock:
                 self._peers[peer] = advert
-                self.heard_at = time.monotonic()
         return advert is not None
 
     def adverts(self) -> dict[str, dict[str, int]]:
@@ -116,13 +110,12 @@ class Holdings:
         return out
 
 
-def advert_due(now: float, news: bool, changed: float, untold: float, told_at: float) -> bool:
+def advert_due(now: float, news: bool, told_at: float) -> bool:
     """Whether a lingering robot advertises now (times in s): what it holds, when that is
-    ``news`` and has not changed since ``changed`` for SETTLE_S (a stream of arrivals is one
-    advert, not one a second) or has gone untold since ``untold`` for MAX_UNTOLD_S; and
-    ADVERT_EVERY_S after the last advert (``told_at``) in any case."""
-    quiet = now >= changed + SETTLE_S or now >= untold + MAX_UNTOLD_S
-    return (news and quiet) or now >= told_at + ADVERT_EVERY_S
+    ``news``, at most once per SETTLE_S after the last advert (``told_at``), and ADVERT_EVERY_S
+    after it in any case. News goes at once: a robot in between hands on what it holds, and
+    the robots at the ends wait only as long as they hear of more."""
+    return (news and now >= told_at + SETTLE_S) or now >= told_at + ADVERT_EVERY_S
 
 
 def wanted(adverts: Mapping[str, Mapping[str, int]], mine: Mapping[str, int]) -> list[str]:

@@ -200,18 +200,14 @@ class RobotNode:
             return False
         start = time.monotonic()
         end = start + max(seconds, self.config.robot.deadline)
-        seen, changed, untold, fetch, said = None, start, start, start, start
+        seen, changed, fetch, said = None, start, start, start
         complete = False
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
             lacking = self.holdings.lacking(mine, self.transport.peers())
             if mine != seen:
                 seen, changed = mine, now
-            if mine == self._told:
-                untold = now
-            asked = self._told_at < start or self.holdings.heard_at > self._told_at
-            news = mine != self._told and asked
-            if holdings.advert_due(now, news, changed, untold, self._told_at):
+            if holdings.advert_due(now, mine != self._told, self._told_at):
                 self._advertise(mine)
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
