@@ -71,7 +71,12 @@ def case(robots: int, name: str) -> dict:
     base = Config(sim=SimOptions(robots=robots), robot=RobotOptions(linger=2.0, deadline=deadline))
     config = backend_follows_drift(replace(base, link=link))
     with tempfile.TemporaryDirectory() as out:
-        r = run_demo(config, FRAMES.get(name), Path(out), lambda m: None, CRASH.get(name))
+        said: list[str] = []
+        try:
+            r = run_demo(config, FRAMES.get(name), Path(out), said.append, CRASH.get(name))
+        except RuntimeError:
+            print("\n".join(said[-40:]), file=sys.stderr)  # the robots' last words
+            raise
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     lost = sum(r["lost"].values())

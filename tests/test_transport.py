@@ -272,6 +272,28 @@ def test_fetch_what_was_missed(tmp_path: Path):
             assert a.stats()["queries"]["served"] == 4
 
 
+def test_fetch_answers_keep_to_the_budget(tmp_path: Path):
+    """Five 1,000 B answers at 2,000 B/s, one second of burst: the last leaves 1.5 s or more
+    after the first."""
+    from gmmap.fleet.outbox import Budget
+
+    port_a = free_port()
+    with (
+        Store(tmp_path / "a.db") as store,
+        Transport(tconfig("lab", "a", port=port_a)) as a,
+    ):
+        for seq in range(5):
+            store.put_submap("a", seq, bytes(1000), own=True)
+        a.serve(store.fetch_provider, budget=Budget(2000.0))
+        with Transport(tconfig("lab", "b", connect=[endpoint(port_a)])) as b:
+            assert b.wait_for_peers(["a"], WAIT)
+            start = time.monotonic()
+            got = b.fetch("a", "submap", 0, timeout=WAIT)
+            elapsed = time.monotonic() - start
+    assert [seq for seq, _ in got] == list(range(5))
+    assert elapsed >= (5 * 1000 - 2000) / 2000 - 0.1
+
+
 def test_fetch_unknown_names_the_robots_a_newcomer_never_met(tmp_path: Path):
     port_a = free_port()
     with (

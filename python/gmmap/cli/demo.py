@@ -52,7 +52,9 @@ def run_demo(
     file (this tree with its name, store and endpoints), and summarises their reports.
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
     and started again on its store."""
-    from gmmap.fleet.transport import free_port
+    # Below the ephemeral range: a relay's port or an outgoing connection cannot take one
+    # before its robot listens on it.
+    from gmmap.fleet.keys import listen_port
 
     start = time.perf_counter()
     if out is None:
@@ -64,7 +66,7 @@ def run_demo(
     for name in names:  # a demo starts afresh: robots would resume from an earlier run's stores
         for stale in out.glob(f"{name}.sqlite*"):
             stale.unlink()
-    ports = [free_port() for _ in names]
+    ports = [listen_port() for _ in names]
     fleet = f"demo{os.getpid()}"
     config.save(out)
     procs: list[subprocess.Popen] = []
@@ -73,7 +75,7 @@ def run_demo(
     if config.link.topology == "router":
         from gmmap.fleet.session import open_router
 
-        ports.append(free_port())
+        ports.append(listen_port())
         router = open_router(ports[-1])
     reach = rendezvous(config, max_frames)
     relays = _start_relays(config, ports, reach)

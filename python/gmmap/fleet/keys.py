@@ -5,6 +5,7 @@ listen endpoint.
 
 from __future__ import annotations
 
+import random
 import socket
 
 from gmmap.errors import TransportConfigError
@@ -25,6 +26,22 @@ def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind((host, 0))
         return int(sock.getsockname()[1])
+
+
+def listen_port(host: str = "127.0.0.1", low: int = 20_000, high: int = 32_768) -> int:
+    """A free TCP port below Linux's ephemeral range (32768 up), for another process to bind
+    later: no port the OS numbers meanwhile (a listener on port 0, an outgoing connection) can
+    take it first. Another process picking the same way may still race."""
+    rng = random.SystemRandom()
+    for _ in range(200):
+        port = rng.randrange(low, high)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            try:
+                sock.bind((host, port))
+            except OSError:
+                continue
+        return port
+    return free_port(host)
 
 
 def data_key(fleet: str, robot: str, kind: str, seq: int) -> str:

@@ -8,7 +8,8 @@ builds, messages wait here and leave in this order:
    (only the latest waits: it says all the robot holds);
 2. own submaps, newest first. Two robots that meet are near each other now, so their newest
    submaps are the likeliest to overlap, verify and join their maps; the older ones follow
-   (a peer fills the gaps by fetching, `RobotNode._fetch`).
+   (a peer fills the gaps by fetching, `RobotNode._fetch`, whose answers go oldest first so
+   that a fetch its timeout cuts short resumes from its first gap).
 
 The budget is a token bucket over the payload and key bytes of everything this robot puts on
 its links, fetch answers included (`Budget.take`, which `Transport.serve` calls too); Zenoh's

@@ -326,8 +326,8 @@ class Transport:
     ) -> None:
         """Answer other robots' fetch queries with ``provider(robot, kind, since_seq)``, which
         returns the ``(seq, payload)`` pairs held (own or received) with seq ≥ since_seq, and,
-        with ``roster()`` (the robots held), `fetch_unknown` queries, newest first, each reply
-        within ``budget``. It runs on the transport's query thread. Calling again replaces all."""
+        with ``roster()`` (the robots held), `fetch_unknown` queries, each reply within
+        ``budget``. It runs on the transport's query thread. Calling again replaces all."""
         self._check_open()
         if not callable(provider):
             raise TransportConfigError(f"provider must be callable; got {provider!r}")
@@ -373,8 +373,8 @@ class Transport:
                 log.exception("gmmap transport: fetch provider failed for %s/%s", robot, kind)
                 query.reply_err(f"provider failed: {err}".encode())
                 return
-            held = [h for h in held if isinstance(h[1], int) and h[1] >= since]
-            for r, seq, payload in sorted(held, key=lambda h: -h[1]):  # `gmmap.fleet.outbox`
+            held = sorted(h for h in held if isinstance(h[1], int) and h[1] >= since)
+            for r, seq, payload in held:  # oldest first: a fetch cut short resumes at its gap
                 data, key = _as_bytes(payload), data_key(self.fleet, r, kind, seq)
                 if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
                     return
