@@ -52,6 +52,9 @@ def run_demo(
     file (this tree with its name, store and endpoints), and summarises their reports.
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
     and started again on its store."""
+    # The robots run in this interpreter: a missing fleet extra is named here, not in n logs.
+    import zenoh  # noqa: F401
+
     # Below the ephemeral range: a relay's port or an outgoing connection cannot take one
     # before its robot listens on it.
     from gmmap.fleet.keys import listen_port
