@@ -184,3 +184,18 @@ def test_guess_mode_rejects_bad_ranges_and_other_modes():
     ):
         r = CliRunner().invoke(main, [*base, *extra])
         assert r.exit_code != 0 and message in r.output, (extra, r.output)
+
+
+def test_repeats_pool_pairs_built_with_other_seeds():
+    """``repeats`` builds the same frame groups again with the next EM and guess seeds: as
+    many pairs again, other fits, the same truths."""
+    from gmmap.eval.registration import evaluate_registration
+    from gmmap.io import datasets
+
+    frames = datasets.open(datasets.BUNDLED_TUM_SLICE, stride=4)[:6]
+    once = evaluate_registration(frames, 2, ("points",), guess_deg=(10, 20))
+    twice = evaluate_registration(frames, 2, ("points",), guess_deg=(10, 20), repeats=2)
+    assert twice["pairs"] == 2 * once["pairs"] and twice["repeats"] == 2
+    assert twice["methods"]["points"] != once["methods"]["points"]
+    with pytest.raises(InvalidInputError, match="repeats"):
+        evaluate_registration(frames, 2, ("points",), repeats=0)

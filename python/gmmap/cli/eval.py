@@ -58,6 +58,13 @@ def command() -> None:
 @setting("--voxel", "build.voxel_size", "Submap voxel size (m).", type=float)
 @setting("--components", "build.n_components", "Components per submap (KITTI: 300).", type=int)
 @click.option("--seed", default=0, show_default=True, help="Seeds the global perturbations.")
+@click.option(
+    "--repeats",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Build the pairs this many times (EM and perturbation seeds counted up) and pool them.",
+)
 @click.option("--scales", help="Registration coarse-to-fine ladder, e.g. 0.5,0.1,0 (metres).")
 @click.option(
     "--odometry-guess",
@@ -83,6 +90,7 @@ def eval_registration(
     stride: int | None,
     config: Config,
     seed: int,
+    repeats: int,
     scales: str | None,
     odometry_guess: bool,
     drift: float | None,
@@ -125,6 +133,7 @@ def eval_registration(
         ladder,
         odometry_guess,
         guess_deg,
+        repeats,
     )
     click.echo(json.dumps(r) if as_json else _registration_table(r, frames_per_submap, global_mode))
 
