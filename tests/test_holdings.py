@@ -2,24 +2,38 @@
 
 import json
 
-from gmmap.fleet.holdings import MAX_BYTES, Holdings, decode, describe, encode
+from gmmap.fleet.holdings import (
+    FINAL,
+    LINGER,
+    MAPPING,
+    MAX_BYTES,
+    Advert,
+    Holdings,
+    decode,
+    describe,
+    encode,
+)
 
 
 def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
     counts = {"robot_1": 7, "robot_0": 9}
-    assert decode(encode(counts)) == (counts, False)
-    assert decode(encode(counts, final=True)) == (counts, True)
-    assert encode(counts) == b'{"held":{"robot_0":9,"robot_1":7},"final":false}'
+    for state in (MAPPING, LINGER, FINAL):
+        assert decode(encode(counts, state, ["b", "a"])) == Advert(counts, state, ("a", "b"))
+    assert encode(counts) == b'{"held":{"robot_0":9,"robot_1":7},"state":"mapping","reach":[]}'
 
-    def advert(held, final=False):
-        return json.dumps({"held": held, "final": final}).encode()
+    def advert(held, state="mapping", reach=()):
+        return json.dumps({"held": held, "state": state, "reach": list(reach)}).encode()
 
     for bad in (
         b"not json",
         b"\xff\xfe",
         b"[1, 2]",
         json.dumps(counts).encode(),  # no envelope
-        advert(counts, final=1),
+        advert(counts, state=1),
+        advert(counts, state="asleep"),
+        json.dumps({"held": counts, "final": False}).encode(),
+        advert(counts, reach=["bad name!"]),
+        advert(counts, reach=[3]),
         advert({"robot_0": -1}),
         advert({"robot_0": 1.5}),
         advert({"robot_0": True}),
@@ -42,8 +56,8 @@ def test_lacking_names_the_peers_that_differ_present_or_gone_without_a_final_adv
     assert h.lacking(mine, ["b", "c"]) == both
     # c vanished without a final advert (a partition, a crash): still waited for.
     assert h.lacking(mine, ["b"]) == both
-    h.update("b", encode(mine, final=True))
-    h.update("c", encode({"a": 5, "b": 5, "c": 2}, final=True))
+    h.update("b", encode(mine, FINAL))
+    h.update("c", encode({"a": 5, "b": 5, "c": 2}, FINAL))
     assert h.lacking(mine, ["b"]) == {}  # b is even; c is done and gone
     assert h.lacking(mine, ["c"]) == {"c": {"they_lack": 0, "we_lack": 2}}  # present still
     h.meet("d")  # met, then gone before it said anything: waited for
@@ -68,3 +82,21 @@ def test_a_peer_is_caught_up_on_its_first_advert_after_it_joined() -> None:
     assert h.caught_up("a") and not h.caught_up("a")
     h.meet("a")  # it left and came back
     assert h.update("a", encode({"a": 4})) and h.caught_up("a")
+
+
+def test_news_is_told_to_lingering_peers_only_when_it_changes_what_they_conclude() -> None:
+    """A lingering robot tells that it lingers at once. Then it tells a lingering peer when it
+    now holds all that peer holds, or more of a robot out of the peer's reach than the peer
+    and its last advert hold; a peer still mapping says so when it stops, and partial
+    catching up is no news."""
+    h = Holdings()
+    told = {"a": 3, "b": 1}
+    assert h.is_news(told, told, MAPPING, [])  # we told we were mapping: now we linger
+    h.update("m", encode({"a": 1}, MAPPING))
+    assert not h.is_news({"a": 9, "b": 1}, told, LINGER, ["m"])
+    h.update("p", encode({"a": 5, "b": 2}, LINGER, reach=["a"]))
+    assert not h.is_news({"a": 4, "b": 1}, told, LINGER, ["p"])  # still behind p
+    assert h.is_news({"a": 5, "b": 2}, told, LINGER, ["p"])  # p need not wait for us
+    assert h.is_news({"a": 3, "b": 3}, told, LINGER, ["p"])  # p can fetch b's third from us
+    assert not h.is_news({"a": 6, "b": 1}, told, LINGER, ["p"])  # a reaches p itself
+    assert not h.is_news({"a": 5, "b": 2}, told, LINGER, ["m"])  # p lingers, but is gone

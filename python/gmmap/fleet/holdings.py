@@ -2,12 +2,14 @@
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
 An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``; its payload is compact JSON,
-``{"held":{"robot_0":9,"robot_1":7},"final":false}``: how many submaps of each robot the
-sender holds. Counts, not sets: a robot's submaps are numbered from 0 and a peer that holds as
-many holds the same ones unless a gap is still being filled, which the next advert shows. A
-robot's last advert is ``final``: it is done. A peer that vanished without one (a partition, a
-crash) is still waited for, by its last advert, until the deadline. A malformed or oversized
-advert is ignored, never trusted.
+``{"held":{"robot_0":9,"robot_1":7},"state":"mapping","reach":["robot_1"]}``: how many
+submaps of each robot the sender holds, and the robots it hears directly. Counts, not sets: a
+robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
+gap is still being filled, which the next advert shows. The state is ``mapping`` while the
+sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
+last advert: it is done. A peer that vanished without a final one (a partition, a crash) is
+still waited for, by its last advert, until the deadline. A malformed or oversized advert is
+ignored, never trusted.
 """
 
 from __future__ import annotations
@@ -15,14 +17,15 @@ from __future__ import annotations
 import json
 import threading
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
 from gmmap.names import NAME_RE
 
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
-# the robot lingers, whenever it changes, at most once per SETTLE_S (`advert_due`), and every
-# ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B of payload and two packets
-# per peer.
+# the robot lingers, whenever it changes (`Holdings.is_news`), at most once per SETTLE_S
+# (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B
+# of payload and two packets per peer.
 SETTLE_S = 1.0
 ADVERT_EVERY_S = 30.0
 FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
@@ -31,28 +34,46 @@ MAX_BYTES = 65_536
 MAX_ROBOTS = 1_024
 
 
-def encode(counts: Mapping[str, int], final: bool = False) -> bytes:
-    advert = {"held": dict(sorted(counts.items())), "final": final}
+MAPPING, LINGER, FINAL = STATES = ("mapping", "linger", "final")
+
+
+@dataclass(frozen=True)
+class Advert:
+    """What a peer told: its counts, its state and the robots it hears directly (``reach``)."""
+
+    held: dict[str, int]
+    state: str = MAPPING
+    reach: tuple[str, ...] = ()
+
+
+def encode(counts: Mapping[str, int], state: str = MAPPING, reach: Iterable[str] = ()) -> bytes:
+    if state not in STATES:
+        raise ValueError(f"an advert's state is one of {STATES}, not {state!r}")
+    advert = {"held": dict(sorted(counts.items())), "state": state, "reach": sorted(reach)}
     return json.dumps(advert, separators=(",", ":")).encode()
 
 
-def decode(payload: bytes) -> tuple[dict[str, int], bool] | None:
-    """The counts and the final flag of an advert, or None when it is not one."""
+def decode(payload: bytes) -> Advert | None:
+    """The advert in ``payload``, or None when it is not one."""
     if len(payload) > MAX_BYTES:
         return None
     try:
         advert = json.loads(payload)
     except (ValueError, UnicodeDecodeError):
         return None
-    if not isinstance(advert, dict) or set(advert) != {"held", "final"}:
+    if not isinstance(advert, dict) or set(advert) != {"held", "state", "reach"}:
         return None
-    counts, final = advert["held"], advert["final"]
-    if not isinstance(counts, dict) or len(counts) > MAX_ROBOTS or type(final) is not bool:
+    counts, state, reach = advert["held"], advert["state"], advert["reach"]
+    if not isinstance(counts, dict) or not isinstance(reach, list) or state not in STATES:
+        return None
+    if max(len(counts), len(reach)) > MAX_ROBOTS:
         return None
     for name, n in counts.items():
         if not NAME_RE.fullmatch(name) or type(n) is not int or n < 0:
             return None
-    return counts, final
+    if not all(isinstance(name, str) and NAME_RE.fullmatch(name) for name in reach):
+        return None
+    return Advert(counts, state, tuple(reach))
 
 
 class Holdings:
@@ -60,7 +81,7 @@ class Holdings:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._peers: dict[str, tuple[dict[str, int], bool]] = {}
+        self._peers: dict[str, Advert] = {}
         self._met: set[str] = set()
         self._fresh: set[str] = set()  # joined, and no advert from it since
 
@@ -88,7 +109,34 @@ class Holdings:
     def adverts(self) -> dict[str, dict[str, int]]:
         """The latest counts each peer told."""
         with self._lock:
-            return {peer: dict(held) for peer, (held, _) in self._peers.items()}
+            return {peer: dict(a.held) for peer, a in self._peers.items()}
+
+    def is_news(
+        self, mine: Mapping[str, int], told: Mapping[str, int], state: str, present: Iterable[str]
+    ) -> bool:
+        """Whether a lingering robot's holdings ``mine`` are news to its peers since its last
+        advert (``told``, in ``state``): that advert said it was still mapping; or a present
+        peer that lingers (so may end on what we told it) now sees us hold all it holds, which
+        it did not, or could fetch from us submaps of a robot out of its reach that neither it
+        nor ``told`` holds. Partial catching up is no news, nor are the submaps of robots a
+        peer hears itself: in a full mesh an advert a second would cost more than the
+        submaps' own overhead. A peer still mapping says so when it lingers."""
+        if state == MAPPING:
+            return True
+        with self._lock:
+            adverts = {p: self._peers[p] for p in present if p in self._peers}
+        for peer, theirs in adverts.items():
+            if theirs.state != LINGER:
+                continue
+            held, reach = theirs.held, {peer, *theirs.reach}
+            covers = all(mine.get(r, 0) >= n for r, n in held.items())
+            covered = all(told.get(r, 0) >= n for r, n in held.items())
+            more = any(
+                n > max(held.get(r, 0), told.get(r, 0)) for r, n in mine.items() if r not in reach
+            )
+            if (covers and not covered) or more:
+                return True
+        return False
 
     def lacking(self, mine: Mapping[str, int], present: Iterable[str]) -> dict[str, dict[str, int]]:
         """Per peer that does not hold what we hold, or holds more: ``they_lack`` and
@@ -96,8 +144,8 @@ class Holdings:
         us). The peers are those present and those met that left without a final advert."""
         with self._lock:
             adverts, met = dict(self._peers), set(self._met)
-        gone = {p for p in met | set(adverts) if not adverts.get(p, ({}, False))[1]}
-        known = {p: adverts[p][0] if p in adverts else None for p in {*present, *gone}}
+        gone = {p for p in met | set(adverts) if p not in adverts or adverts[p].state != FINAL}
+        known = {p: adverts[p].held if p in adverts else None for p in {*present, *gone}}
         out = {}
         for peer, theirs in sorted(known.items()):
             if theirs is None:  # present or met, and silent

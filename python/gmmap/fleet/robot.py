@@ -111,6 +111,7 @@ class RobotNode:
         self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
         self.holdings = holdings.Holdings()  # what the peers say they hold
         self._adverts, self._told_at, self._told = 0, 0.0, {}
+        self._told_state = self._state = holdings.MAPPING
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.wire: dict[int, dict] = {}  # own seq → bytes
@@ -200,22 +201,25 @@ class RobotNode:
             return False
         start = time.monotonic()
         end = start + max(seconds, self.config.robot.deadline)
-        seen, changed, fetch, said = None, start, start, start
-        complete = False
+        seen, changed, fetch, said, complete = None, start, start, start, False
+        self._state = holdings.LINGER
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
-            lacking = self.holdings.lacking(mine, self.transport.peers())
+            present = self.transport.peers()
+            lacking = self.holdings.lacking(mine, present)
             if mine != seen:
                 seen, changed = mine, now
-            if holdings.advert_due(now, mine != self._told, self._told_at):
-                self._advertise(mine)
+            news = self.holdings.is_news(mine, self._told, self._told_state, present)
+            if holdings.advert_due(now, news, self._told_at):
+                self._advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
             if now >= start + seconds and settled and not lacking and self._idle():
                 complete = True
                 break
             wanted = holdings.wanted(self.holdings.adverts(), mine)
-            if now >= fetch and wanted:  # only what a peer says it holds more of
+            # Only what a peer says it holds more of, and not while submaps are arriving anyway.
+            if now >= fetch and wanted and now >= changed + holdings.SETTLE_S:
                 self.fetch_queue.put(tuple(wanted))
                 fetch = now + holdings.FETCH_EVERY_S
             if progress and lacking and now >= said + holdings.PROGRESS_EVERY_S:
@@ -224,7 +228,7 @@ class RobotNode:
             time.sleep(0.05)
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
-        self._advertise(self._held(), final=True)  # done: the peers need not wait for us
+        self._advertise(self._held(), holdings.FINAL)  # done: the peers need not wait for us
         self.outbox.flush(timeout=max(5.0, seconds))
         if self.config.robot.rejudge and not self.stopping:
             if progress:
@@ -236,11 +240,11 @@ class RobotNode:
     def _held(self) -> dict[str, int]:
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
-    def _advertise(self, counts: dict[str, int], final: bool = False) -> None:
+    def _advertise(self, counts: dict[str, int], state: str) -> None:
         with self._lock:  # the lingering node and a peer's join both advertise
-            self._told, self._told_at = counts, time.monotonic()
+            self._told, self._told_at, self._told_state = counts, time.monotonic(), state
             seq, self._adverts = self._adverts, self._adverts + 1
-        self.outbox.put(holdings.KIND, seq, holdings.encode(counts, final))
+        self.outbox.put(holdings.KIND, seq, holdings.encode(counts, state, self.transport.peers()))
 
     def _publish(self, kind: str, seq: int, payload: bytes) -> None:
         """The outbox's way out (its thread): a submap counts as sent once published."""
@@ -344,7 +348,7 @@ class RobotNode:
     def _tell(self, joined: float) -> None:  # unless an advert reached it, or we hold nothing
         held = self._held() if not self.stopping else {}
         if any(held.values()) and self._told_at < joined + holdings.SETTLE_S / 2:
-            self._advertise(held)
+            self._advertise(held, self._state)
 
     def _fetcher(self) -> None:
         while not self.stopping:
