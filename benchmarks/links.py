@@ -11,7 +11,9 @@ robots are within 8 m, or in line of sight, the robots moving in step at twice t
 third submap and restarted on its store, and perfect links over the first 100 frames (the
 difference to the whole run is what one more delivered submap costs on the wire, the
 sessions' set-up and the ending apart). Per case: submaps lost
-(built but never delivered to a peer; goal 0), whether every robot ended complete, the wall
+(built but never delivered to a peer in reach; goal 0), and on rendezvous links those
+built after their robot left every peer's reach for good (``out_of_reach``: no protocol can
+deliver them; `gmmap.eval.delivery`), whether every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
 whether the robots end holding the same submaps, groups and pose-graph matches as on
@@ -20,7 +22,7 @@ bytes and packets an idle link between two robots carries per minute. With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
 (``completeness_<n>_robots.png``). On rendezvous links a robot that ends out of everyone's
 reach keeps its last submaps (they would go at the next meeting) and the others wait for it
-until the deadline (30 s): those submaps count as lost, and the robots end incomplete.
+until the deadline (30 s): those submaps are out of reach, and the robots end incomplete.
 
     .venv/bin/python benchmarks/links.py [--robots 3,5] [--cases perfect,10k,...] [--plots DIR]
 """
@@ -80,11 +82,14 @@ def case(robots: int, name: str) -> dict:
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     lost = sum(r["lost"].values())
+    unreachable = sum(r.get("out_of_reach", {}).values())
+    held_all = not lost and not unreachable
     return {
         # None while some submap never reached some robot
-        "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1) if not lost else None,
+        "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1) if held_all else None,
         "curve": fleet_curve(curves),
         "lost": lost,
+        "out_of_reach": unreachable,
         "complete": all(rep["complete"] for rep in reports.values()),
         "wall_s": round(r["wall_s"], 1),
         "wire_bytes_per_delivered_submap": r["wire_bytes_per_delivered_submap"],

@@ -184,18 +184,24 @@ def test_zenoh_peers_talk_through_the_relay_and_it_sees_the_framing() -> None:
     assert counts["forward"].bytes > 0  # B's handshake and subscription
 
 
+def _demo(tmp_path: Path, robots: int, *flags: str, timeout: float) -> tuple:
+    """``gmmap demo`` with ``robots`` robot processes, lingering 1.5 s and joining on one
+    match, its output in ``tmp_path``: what the robots said (stderr) and its JSON summary."""
+    out = subprocess.run(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo",
+         "--robots", str(robots), "--linger", "1.5", "--out", str(tmp_path), "--json",
+         "--min-matches", "1", *flags],
+        capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    return out.stderr, json.loads(out.stdout)
+
+
 def test_robots_behind_500_bytes_per_second_deliver_everything(tmp_path):
     """Two robot processes talk only through a relay capped at 500 B/s each way, slower than
     they build submaps: neither quits before the other holds all it holds. Every payload byte
     a robot received crossed the relay, with Zenoh's own traffic on top."""
-    out = subprocess.run(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
-         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--link-rate", "500", "--deadline", "40"],
-        capture_output=True, text=True, timeout=180,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout)
+    _, r = _demo(tmp_path, 2, "--link-rate", "500", "--deadline", "40", timeout=180)
     print(json.dumps({k: r[k] for k in ("wire", "lost", "received", "bytes_received")}))
     assert load_config(tmp_path / "robot_0.yaml").transport.connect != ()
     assert [link["robots"] for link in r["links"]] == [["robot_0", "robot_1"]]
@@ -210,17 +216,13 @@ def test_robots_behind_500_bytes_per_second_deliver_everything(tmp_path):
 def test_a_rendezvous_link_delivers_the_backlog_when_the_robots_meet(tmp_path) -> None:
     """Robots 0 and 1 start 8.5 m apart and come within 8 m after about 45 frames: each has
     built two submaps by then, kept them, and delivers them once the link is up."""
-    out = subprocess.run(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
-         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--link-range", "8", "--max-frames", "120", "--deadline", "60"],
-        capture_output=True, text=True, timeout=240,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout)
+    _, r = _demo(
+        tmp_path, 2, "--link-range", "8", "--max-frames", "120", "--deadline", "60", timeout=240
+    )
     config = load_config(tmp_path / "robot_0.yaml")
     assert config.robot.wait_for == ()  # apart at the start
     assert r["lost"] == {"robot_0": 0, "robot_1": 0}
+    assert r["out_of_reach"] == {"robot_0": 0, "robot_1": 0}  # they stay together
     reach = rendezvous(config, 120)
     met = next(k for k in range(120) if reach.up(0, 1, frame=k))
     assert met >= 40, met  # two submaps of 20 frames each built apart
@@ -238,15 +240,8 @@ def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:
     config = tmp_path / "outage.yaml"
     lease = "transport:\n  zenoh_options:\n    transport/link/tx/lease: 10000\n"
     config.write_text("link:\n  outages: [[4, 16]]\n" + lease)
-    out = subprocess.run(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "2",
-         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--config", str(config)],
-        capture_output=True, text=True, timeout=180,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout)
-    assert "waiting for" in out.stderr
+    said, r = _demo(tmp_path, 2, "--config", str(config), timeout=180)
+    assert "waiting for" in said
     assert r["lost"] == {"robot_0": 0, "robot_1": 0}
     assert r["received"]["robot_0"] > 0 and r["received"]["robot_1"] > 0
 
@@ -254,15 +249,8 @@ def test_a_partition_heals_and_nothing_is_lost(tmp_path) -> None:
 def test_a_robot_reaches_another_only_through_a_third(tmp_path) -> None:
     """Three robots in a chain (0 - 1 - 2, no link between 0 and 2): robot_1 hands each end's
     submaps on to the other, and every robot ends holding everything."""
-    out = subprocess.run(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "3",
-         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--link-topology", "chain", "--deadline", "60", "--max-frames", "120",
-         "--plots", str(tmp_path / "plots")],
-        capture_output=True, text=True, timeout=240,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout)
+    flags = ("--link-topology", "chain", "--deadline", "60", "--max-frames", "120")
+    _, r = _demo(tmp_path, 3, *flags, "--plots", str(tmp_path / "plots"), timeout=240)
     assert [link["robots"] for link in r["links"]] == [
         ["robot_0", "robot_1"],
         ["robot_1", "robot_2"],
@@ -390,14 +378,8 @@ def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
 def test_robots_as_clients_of_one_router(tmp_path) -> None:
     """Three robots, each a Zenoh client linked only to one router: it routes their submaps,
     adverts and fetches, and every robot ends holding everything."""
-    out = subprocess.run(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--robots", "3",
-         "--linger", "1.5", "--out", str(tmp_path), "--json", "--min-matches", "1",
-         "--link-topology", "router", "--deadline", "60", "--max-frames", "120"],
-        capture_output=True, text=True, timeout=240,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout)
+    flags = ("--link-topology", "router", "--deadline", "60", "--max-frames", "120")
+    _, r = _demo(tmp_path, 3, *flags, timeout=240)
     assert [link["robots"] for link in r["links"]] == [[n, "router"] for n in r["received"]]
     transport = load_config(tmp_path / "robot_0.yaml").transport
     assert transport.mode == "client" and transport.listen == ()

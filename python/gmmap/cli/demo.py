@@ -115,6 +115,8 @@ def run_demo(
     reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
     truth = {n: json.loads((out / f"{n}.truth.json").read_text()) for n in names}
     report = summarise(reports, truth, sim)
+    if reach is not None:  # links that come and go: lost is what a peer in reach never got
+        report["lost"], report["out_of_reach"] = _reach_losses(config, reach, out)
     if relays:
         from gmmap.eval.wire import wire_report
 
@@ -274,6 +276,7 @@ def _relay(proc: subprocess.Popen, log) -> None:
 def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOptions) -> dict:
     """The demo's report from the robots' reports, their anchors' ground truth (``anchors``:
     robot → seq → 4x4) and the simulator's map frames."""
+    from gmmap.eval.delivery import lost
     from gmmap.eval.pairs import match_errors, pair_errors
     from gmmap.io.sim import simulate_options
 
@@ -313,7 +316,7 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
-        "lost": lost(reports),
+        "lost": lost(reports),  # on rendezvous links, `_reach_losses` replaces it
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
@@ -322,14 +325,15 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
     }
 
 
-def lost(reports: dict[str, dict]) -> dict[str, int]:
-    """Per robot, its submaps that some peer never received (every demo robot is in reach
-    of every other, directly or through the robots in between), counted once per peer."""
-    built = {n: r["submaps_built"] for n, r in reports.items()}
-    return {
-        n: sum(max(0, built[n] - r["held"].get(n, 0)) for p, r in reports.items() if p != n)
-        for n in sorted(reports)
-    }
+def _reach_losses(config: Config, reach, out: Path) -> tuple:
+    """On rendezvous links (``reach``), per robot its submaps a peer in reach after them never
+    got (lost) and those no peer could reach (`gmmap.eval.delivery`), from the robots' stores."""
+    from gmmap.eval.delivery import links_up, lost_in_reach
+
+    n = config.sim.robots
+    linked = links_up(reach.up, config.link.pairs(n), n, reach.frames)
+    stores = {f"robot_{i}": out / f"robot_{i}.sqlite" for i in range(n)}
+    return lost_in_reach(stores, linked, reach.frame)
 
 
 def _totals(reports: dict[str, dict], direction: str) -> dict:

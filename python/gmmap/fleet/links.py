@@ -308,9 +308,14 @@ class Rendezvous:
         self._lock = threading.Lock()
         self._memo: dict[tuple, bool] = {}
 
-    def frame(self) -> int:
-        """The frame the robots are at now."""
-        return max(0, int((self._clock() - self._start) * self._fps))
+    @property
+    def frames(self) -> int:
+        """Frames until the last robot's last: the links stay as they are from then on."""
+        return max(len(t) for t in self._tracks)
+
+    def frame(self, at: float | None = None) -> int:
+        """The frame the robots are at ``at`` (a time on the clock; None: now)."""
+        return max(0, int(((self._clock() if at is None else at) - self._start) * self._fps))
 
     def up(self, i: int, j: int, frame: int | None = None) -> bool:
         """Whether robots i and j are in reach at ``frame`` (None: now)."""

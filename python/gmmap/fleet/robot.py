@@ -16,8 +16,8 @@ Stages, each a thread:
   `gmmap.fleet.holdings`), and each fetches the robots the other's advert holds more of (from
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
-  reach come through the robots in between (`Transport.answers_for`). Robots that meet fresh
-  hold nothing to fetch and send no query.
+  reach, or present but silent (`gmmap.fleet.arrivals`), come through the robots in between
+  (`Transport.answers_for`). Robots that meet fresh hold nothing to fetch and send no query.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -43,6 +43,7 @@ from pathlib import Path
 from gmmap.config import Config
 from gmmap.errors import DecodeError
 from gmmap.fleet import holdings
+from gmmap.fleet.arrivals import Arrivals
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of, match_of
@@ -108,7 +109,7 @@ class RobotNode:
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # inbox items taken and not finished, and a running optimisation
-        self._arrived: dict[str, set[int]] = {}  # seqs received per robot, stored or queued
+        self.arrivals = Arrivals()  # what arrived of each robot: where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
         self._adverts, self._told_at, self._told = 0, 0.0, {}
         self._told_state = self._state = holdings.MAPPING
@@ -331,8 +332,7 @@ class RobotNode:
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         if kind == KIND:
-            with self._lock:
-                self._arrived.setdefault(robot, set()).add(seq)
+            self.arrivals.add(robot, seq, direct=True)
             self._enqueue(Arrived("received", robot, seq, payload))
         elif kind == holdings.KIND and self.holdings.update(robot, payload):
             if not self.holdings.caught_up(robot):  # only its first advert since it joined
@@ -369,22 +369,17 @@ class RobotNode:
         for r in sorted(robots):
             if self.stopping:
                 return
-            # What arrived counts, stored or still queued: asking again for submaps waiting in
-            # the inbox of a busy robot would have them sent twice.
-            stored = set(self.store.seqs(r))  # read outside the lock the receivers take
-            with self._lock:
-                have = stored | self._arrived.get(r, set())
-            gaps = [seq for seq in range(max(have) + 1) if seq not in have] if have else []
-            since = gaps[0] if gaps else (max(have) + 1 if have else 0)
-            relay = r not in self.transport.peers()  # handed on by whoever holds them
-            for seq, payload in self.transport.fetch(r, KIND, since, relay=relay):
+            since = self.arrivals.since(r, self.store.seqs(r))
+            relay = self.arrivals.relayed(r, self.transport.peers())
+            got = self.transport.fetch(r, KIND, since, relay=relay)
+            if not got and not relay:
+                self.arrivals.unanswered(r)
+            for seq, payload in got:
                 self._enqueue_fetched(r, seq, payload)
 
     def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
-        with self._lock:
-            if seq in self._arrived.setdefault(robot, set()):
-                return
-            self._arrived[robot].add(seq)
+        if not self.arrivals.add(robot, seq):
+            return
         self.counts["fetched"] += 1
         self._enqueue(Arrived("fetched", robot, seq, payload))
 

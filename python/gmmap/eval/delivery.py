@@ -1,0 +1,80 @@
+"""Which submaps a fleet lost: built, in reach of a peer at some moment after, and never
+delivered to it (`gmmap demo`'s ``lost``). On links that come and go (rendezvous links) a
+submap built after its robot left everyone's reach for good cannot be delivered by any
+protocol: it counts as ``out_of_reach``, not as lost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from gmmap.fleet.store import Store
+
+
+def lost(reports: dict[str, dict]) -> dict[str, int]:
+    """Per robot, its submaps that some peer never received, counted once per peer: on links
+    that stay (every robot in reach of every other, directly or through the robots in
+    between), all are in reach; on rendezvous links see `lost_in_reach`."""
+    built = {n: r["submaps_built"] for n, r in reports.items()}
+    return {
+        n: sum(max(0, built[n] - r["held"].get(n, 0)) for p, r in reports.items() if p != n)
+        for n in sorted(reports)
+    }
+
+
+def links_up(
+    up: Callable[[int, int, int], bool], pairs: Sequence[tuple[int, int]], n: int, frames: int
+) -> np.ndarray:
+    """(frames, n, n) bools: robots i and j linked at frame k (``up(i, j, k)``, i < j, for the
+    linked ``pairs``)."""
+    linked = np.zeros((frames, n, n), dtype=bool)
+    for i, j in pairs:
+        for k in range(frames):
+            linked[k, i, j] = linked[k, j, i] = up(i, j, k)
+    return linked
+
+
+def reachable(linked: np.ndarray, origin: int, frame: int) -> set[int]:
+    """The robots that a submap of ``origin`` finished at ``frame`` can reach hop by hop as the
+    links come and go (any number of hops within a frame; after the last frame the links stay
+    as they ended, as the robots do)."""
+    got = np.zeros(linked.shape[1], dtype=bool)
+    got[origin] = True
+    for up in linked[min(max(frame, 0), len(linked) - 1) :]:
+        while True:
+            more = got | up[got].any(axis=0)
+            if (more == got).all():
+                break
+            got = more
+    return {int(i) for i in np.flatnonzero(got)} - {origin}
+
+
+def lost_in_reach(
+    stores: Mapping[str, Path], linked: np.ndarray, frame_at: Callable[[float], int]
+) -> tuple[dict[str, int], dict[str, int]]:
+    """Per robot (``stores``: name → store, in robot order), its submaps that some peer in
+    reach after them never received (``lost``) and those no peer could reach
+    (``out_of_reach``), counted once per peer. A submap can leave once it is in its robot's
+    store: the frame the robots were at then (``frame_at``: Unix time → frame) is where its
+    reach (`reachable`) starts."""
+    names = list(stores)
+    held: dict[str, set[tuple[str, int]]] = {}
+    built: dict[str, dict[int, float]] = {}  # own submaps: seq -> when it was stored
+    for name, path in stores.items():
+        with Store(path, durable=False) as store:
+            records = store.submaps()
+        held[name] = {(r.robot, r.seq) for r in records}
+        built[name] = {r.seq: r.received for r in records if r.own}
+    lost = dict.fromkeys(names, 0)
+    out_of_reach = dict.fromkeys(names, 0)
+    for i, name in enumerate(names):
+        for seq, stored in built[name].items():
+            reach = reachable(linked, i, frame_at(stored))
+            for j, peer in enumerate(names):
+                if j != i and (name, seq) not in held[peer]:
+                    counts = lost if j in reach else out_of_reach
+                    counts[name] += 1
+    return lost, out_of_reach

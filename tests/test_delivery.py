@@ -1,0 +1,25 @@
+"""What counts as lost on links that come and go (`gmmap.eval.delivery`)."""
+
+import numpy as np
+
+from gmmap.eval.delivery import links_up, reachable
+
+
+def test_a_submap_reaches_the_robots_a_chain_of_later_meetings_leads_to() -> None:
+    # 0 meets 1 at frame 1 only, 1 meets 2 at frame 3 only; at frame 5 both links are up.
+    meetings = {(0, 1): {1, 5}, (1, 2): {3, 5}}
+    linked = links_up(lambda i, j, k: k in meetings[(i, j)], list(meetings), 3, 6)
+    assert linked.shape == (6, 3, 3) and linked[1, 1, 0] and not linked[2, 0, 1]
+    assert reachable(linked, 0, 0) == {1, 2}  # 1 at frame 1, which hands it on at frame 3
+    assert reachable(linked, 2, 0) == {1, 0}  # 1 at frame 3; 0 and 1 meet again at frame 5
+    assert reachable(linked, 2, 4) == {0, 1}  # both hops within frame 5
+    linked[5] = False
+    assert reachable(linked, 2, 2) == {1}  # 0 met 1 before 1 held it
+    assert reachable(linked, 0, 4) == set()  # after its last meeting
+    assert reachable(linked, 0, 99) == set()  # after the last frame the links stay as they end
+
+
+def test_links_stay_as_they_ended_after_the_last_frame() -> None:
+    linked = links_up(lambda i, j, k: k == 2, [(0, 1)], 2, 3)
+    assert reachable(linked, 0, 7) == {1}
+    assert not np.any(linked[:2])
