@@ -115,8 +115,12 @@ def run_demo(
     reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
     truth = {n: json.loads((out / f"{n}.truth.json").read_text()) for n in names}
     report = summarise(reports, truth, sim)
-    if reach is not None:  # links that come and go: lost is what a peer in reach never got
-        report["lost"], report["out_of_reach"] = _reach_losses(config, reach, out)
+    if reach is None:  # every robot in reach of every other, directly or through others
+        from gmmap.eval.delivery import lost
+
+        report["lost"] = lost(reports)
+    else:  # links that come and go: lost is what a peer in reach never got
+        report["lost"], report["out_of_reach"] = _reach_losses(config, reach, names, out)
     if relays:
         from gmmap.eval.wire import wire_report
 
@@ -276,7 +280,6 @@ def _relay(proc: subprocess.Popen, log) -> None:
 def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOptions) -> dict:
     """The demo's report from the robots' reports, their anchors' ground truth (``anchors``:
     robot → seq → 4x4) and the simulator's map frames."""
-    from gmmap.eval.delivery import lost
     from gmmap.eval.pairs import match_errors, pair_errors
     from gmmap.io.sim import simulate_options
 
@@ -316,7 +319,6 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
-        "lost": lost(reports),  # on rendezvous links, `_reach_losses` replaces it
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
@@ -325,15 +327,14 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
     }
 
 
-def _reach_losses(config: Config, reach, out: Path) -> tuple:
+def _reach_losses(config: Config, reach, names: list[str], out: Path) -> tuple:
     """On rendezvous links (``reach``), per robot its submaps a peer in reach after them never
     got (lost) and those no peer could reach (`gmmap.eval.delivery`), from the robots' stores."""
     from gmmap.eval.delivery import links_up, lost_in_reach
 
-    n = config.sim.robots
+    n = len(names)
     linked = links_up(reach.up, config.link.pairs(n), n, reach.frames)
-    stores = {f"robot_{i}": out / f"robot_{i}.sqlite" for i in range(n)}
-    return lost_in_reach(stores, linked, reach.frame)
+    return lost_in_reach({name: out / f"{name}.sqlite" for name in names}, linked, reach.frame)
 
 
 def _totals(reports: dict[str, dict], direction: str) -> dict:
