@@ -187,13 +187,27 @@ def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
     try:
         b.start_frames(frames[0:2]).join()
         time.sleep(1.0)
-        b.fetch_queue.put(("a",))  # a fetch, as an advert of a's would start
+        assert b.transport.fetch("a", "submap", 0) == []
         assert a.drain(5) and b.drain(5)
         assert a.store.robots() == [] and a.counts["received"] == 0
         assert b.store.robots() == ["b"] and b.transport.peers() == []
     finally:
         a.stop()
         b.stop()
+
+
+def test_a_fetch_asks_only_for_what_an_advert_shows_and_has_not_arrived(tmp_path):
+    from gmmap.fleet import holdings
+
+    b = node(tmp_path, "b", free_port())
+    asked = []
+    b.transport.fetch = lambda robot, kind, since, relay=False: asked.append((robot, since)) or []
+    b.holdings.update("c", holdings.encode({"a": 2, "c": 3}, holdings.LINGER))
+    b.arrivals.add("a", 0)
+    b.arrivals.add("a", 1)  # queued, not stored yet: the advert's count, not news
+    b.arrivals.add("c", 0)
+    b._fetch({"a", "c"})
+    assert asked == [("c", 1)]
 
 
 def test_demo_runs_two_robot_processes(tmp_path):

@@ -23,8 +23,8 @@ from gmmap.names import NAME_RE
 
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
-# the robot lingers, whenever it changes (`Holdings.is_news`), at most once per SETTLE_S
-# (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B
+# the robot lingers, whenever it changes (`Holdings.is_news`) and then rests for SETTLE_S, at
+# most once per SETTLE_S (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B
 # of payload and two packets per peer.
 SETTLE_S = 1.0
 ADVERT_EVERY_S = 30.0

@@ -210,7 +210,8 @@ class RobotNode:
             lacking = self.holdings.lacking(mine, present)
             if mine != seen:
                 seen, changed = mine, now
-            news = self.holdings.is_news(mine, self._told, self._told_state, present)
+            quiet = now >= changed + holdings.SETTLE_S  # one advert once submaps stop arriving
+            news = quiet and self.holdings.is_news(mine, self._told, self._told_state, present)
             if holdings.advert_due(now, news, self._told_at):
                 self._advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
@@ -370,6 +371,9 @@ class RobotNode:
             if self.stopping:
                 return
             since = self.arrivals.since(r, self.store.seqs(r))
+            # The adverts count what is stored; what is still queued here counts as arrived.
+            if since >= max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0):
+                continue
             relay = self.arrivals.relayed(r, self.transport.peers())
             got = self.transport.fetch(r, KIND, since, relay=relay)
             if not got and not relay:
