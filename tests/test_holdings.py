@@ -84,19 +84,19 @@ def test_a_peer_is_caught_up_on_its_first_advert_after_it_joined() -> None:
     assert h.update("a", encode({"a": 4})) and h.caught_up("a")
 
 
-def test_news_is_told_to_lingering_peers_only_when_it_changes_what_they_conclude() -> None:
+def test_news_is_told_to_peers_only_when_it_changes_what_they_conclude() -> None:
     """A lingering robot tells that it lingers at once. Then it tells a lingering peer when it
-    now holds all that peer holds, or more of a robot out of the peer's reach than the peer
-    and its last advert hold; a peer still mapping says so when it stops, and partial
-    catching up is no news."""
+    now holds all that peer holds, and any peer when it holds more of a robot out of the
+    peer's reach than the peer and its last advert hold; partial catching up is no news."""
     h = Holdings()
     told = {"a": 3, "b": 1}
     assert h.is_news(told, told, MAPPING, [])  # we told we were mapping: now we linger
-    h.update("m", encode({"a": 1}, MAPPING))
-    assert not h.is_news({"a": 9, "b": 1}, told, LINGER, ["m"])
+    h.update("m", encode({"a": 1}, MAPPING, reach=["a"]))
+    assert not h.is_news({"a": 9, "b": 1}, told, LINGER, ["m"])  # a reaches m itself
+    assert h.is_news({"a": 3, "b": 2}, told, LINGER, ["m"])  # only we can hand b's on to m
     h.update("p", encode({"a": 5, "b": 2}, LINGER, reach=["a"]))
     assert not h.is_news({"a": 4, "b": 1}, told, LINGER, ["p"])  # still behind p
     assert h.is_news({"a": 5, "b": 2}, told, LINGER, ["p"])  # p need not wait for us
     assert h.is_news({"a": 3, "b": 3}, told, LINGER, ["p"])  # p can fetch b's third from us
     assert not h.is_news({"a": 6, "b": 1}, told, LINGER, ["p"])  # a reaches p itself
-    assert not h.is_news({"a": 5, "b": 2}, told, LINGER, ["m"])  # p lingers, but is gone
+    assert not h.is_news({"a": 5, "b": 2}, told, LINGER, [])  # p lingers, but is gone

@@ -5,17 +5,31 @@
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Iterable
+
+# A present robot that has sent nothing directly for this long, while others hold more of it,
+# is fetched through them: a rendezvous link that went down stays "present" until Zenoh's
+# lease expires (30 s), and a short meeting with a robot in between would pass unused.
+QUIET_S = 5.0
 
 
 class Arrivals:
     """The sequence numbers received per robot, and the robots that are present yet did not
-    answer a fetch for their own submaps (thread-safe: Zenoh's threads and the fetcher)."""
+    answer a fetch for their own submaps or have been quiet (thread-safe: Zenoh's threads and
+    the fetcher). Times are ``clock()`` seconds."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock=time.monotonic) -> None:
         self._lock = threading.Lock()
         self._seqs: dict[str, set[int]] = {}
         self._silent: set[str] = set()
+        self._heard: dict[str, float] = {}  # when it joined or last sent us something itself
+        self._clock = clock
+
+    def met(self, robot: str) -> None:
+        """``robot`` joined: its quiet time starts now."""
+        with self._lock:
+            self._heard[robot] = self._clock()
 
     def add(self, robot: str, seq: int, direct: bool = False) -> bool:
         """Notes that ``robot``'s ``seq`` arrived (``direct``: from that robot itself, which is
@@ -24,6 +38,7 @@ class Arrivals:
             seqs = self._seqs.setdefault(robot, set())
             if direct:
                 self._silent.discard(robot)
+                self._heard[robot] = self._clock()
             new = seq not in seqs
             seqs.add(seq)
         return new
@@ -38,10 +53,11 @@ class Arrivals:
 
     def relayed(self, robot: str, present: Iterable[str]) -> bool:
         """Whether the robots in between must answer for ``robot``: it is out of reach, or
-        present and silent (a link that stalled: Zenoh sees it leave only when its lease
-        expires)."""
+        present and silent or quiet for QUIET_S (a link that stalled: Zenoh sees it leave only
+        when its lease expires)."""
         with self._lock:
-            return robot not in set(present) or robot in self._silent
+            quiet = self._clock() > self._heard.get(robot, -float("inf")) + QUIET_S
+            return robot not in set(present) or robot in self._silent or quiet
 
     def unanswered(self, robot: str) -> None:
         """``robot``, present, sent nothing of its own when asked: relays answer from now on,

@@ -24,8 +24,8 @@ from gmmap.names import NAME_RE
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
 # the robot lingers, whenever it changes (`Holdings.is_news`) and then rests for SETTLE_S, at
-# most once per SETTLE_S (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each advert costs about 80 B
-# of payload and two packets per peer.
+# most once per SETTLE_S (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each
+# advert costs about 100 B of payload and two packets per peer.
 SETTLE_S = 1.0
 ADVERT_EVERY_S = 30.0
 FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
@@ -116,25 +116,23 @@ class Holdings:
     ) -> bool:
         """Whether a lingering robot's holdings ``mine`` are news to its peers since its last
         advert (``told``, in ``state``): that advert said it was still mapping; or a present
-        peer that lingers (so may end on what we told it) now sees us hold all it holds, which
-        it did not, or could fetch from us submaps of a robot out of its reach that neither it
-        nor ``told`` holds. Partial catching up is no news, nor are the submaps of robots a
-        peer hears itself: in a full mesh an advert a second would cost more than the
-        submaps' own overhead. A peer still mapping says so when it lingers."""
+        peer could fetch from us submaps of a robot out of its reach that neither it nor
+        ``told`` holds (only robots in between carry those); or a present peer that lingers
+        (so may end on what we told it) now sees us hold all it holds, which it did not.
+        Partial catching up is no news, nor are the submaps of robots a peer hears itself: in
+        a full mesh an advert a second would cost more than the submaps' own overhead."""
         if state == MAPPING:
             return True
         with self._lock:
             adverts = {p: self._peers[p] for p in present if p in self._peers}
         for peer, theirs in adverts.items():
-            if theirs.state != LINGER:
-                continue
             held, reach = theirs.held, {peer, *theirs.reach}
-            covers = all(mine.get(r, 0) >= n for r, n in held.items())
-            covered = all(told.get(r, 0) >= n for r, n in held.items())
             more = any(
                 n > max(held.get(r, 0), told.get(r, 0)) for r, n in mine.items() if r not in reach
             )
-            if (covers and not covered) or more:
+            covers = all(mine.get(r, 0) >= n for r, n in held.items())
+            covered = all(told.get(r, 0) >= n for r, n in held.items())
+            if more or (theirs.state == LINGER and covers and not covered):
                 return True
         return False
 

@@ -5,8 +5,8 @@ Stages, each a thread:
 - **construction**: frames → `SubmapBuilder` → `gmmap.encode` → own store → outbox (kind
   "submap"; `gmmap.fleet.outbox`: sent in priority order within ``robot.budget``). The node
   works on what it sent: the decoded copy of its own submap, the same bytes every other robot
-  sees, goes on to matching. Each built submap is also given to ``on_built``
-  (a `Built` event: status lines, evaluation outside the node).
+  sees, goes on to matching. Each built submap is also given to ``on_built`` (a `Built`
+  event: status lines, evaluation outside the node).
 - **matching**: the transport's subscription (and fetch replies) → inbox (`Arrived` events) →
   decode → store → `Mapper.add` (place recognition against the other robots' submaps held,
   verification, a judged pair never registered again) → each judged pair stored as an edge.
@@ -16,8 +16,9 @@ Stages, each a thread:
   `gmmap.fleet.holdings`), and each fetches the robots the other's advert holds more of (from
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
-  reach, or present but silent (`gmmap.fleet.arrivals`), come through the robots in between
-  (`Transport.answers_for`). Robots that meet fresh hold nothing to fetch and send no query.
+  reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
+  between (`Transport.answers_for`), even while it maps. Robots that meet fresh hold nothing
+  to fetch and send no query.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -118,11 +119,9 @@ class RobotNode:
         self.wire: dict[int, dict] = {}  # own seq → bytes
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
         self.reloaded = self._reload()
-        self.transport = Transport(
-            TransportConfig(config.robot.fleet, self.robot, config.transport)
-        )
-        self.budget = Budget(config.robot.budget)
         fleet = config.robot.fleet
+        self.transport = Transport(TransportConfig(fleet, self.robot, config.transport))
+        self.budget = Budget(config.robot.budget)
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
 
     # ---- persistence ------------------------------------------------------------------------
@@ -336,14 +335,16 @@ class RobotNode:
             self.arrivals.add(robot, seq, direct=True)
             self._enqueue(Arrived("received", robot, seq, payload))
         elif kind == holdings.KIND and self.holdings.update(robot, payload):
-            if not self.holdings.caught_up(robot):  # only its first advert since it joined
-                return
             wanted = holdings.wanted({robot: self.holdings.adverts()[robot]}, self._held())
+            # After its first advert since it joined, only what it alone can hand on to us.
+            if not self.holdings.caught_up(robot):
+                wanted = [r for r in wanted if self.arrivals.relayed(r, self.transport.peers())]
             if wanted:
                 self.fetch_queue.put(tuple(wanted))
 
     def _joined(self, peer: str) -> None:
         """A peer joined: tell it what we hold once its subscriber is surely declared."""
+        self.arrivals.met(peer)
         threading.Timer(holdings.SETTLE_S, self._tell, (time.monotonic(),)).start()
 
     def _tell(self, joined: float) -> None:  # unless an advert reached it, or we hold nothing

@@ -461,9 +461,9 @@ class Transport:
             raise TransportError(f"cannot query {selector}: {err}") from err
         found: dict[tuple[str, int], bytes] = {}
         for reply in replies:
-            sample = reply.ok
-            if sample is None:
-                log.warning("gmmap transport: a peer failed to answer %s: %s", selector, reply.err)
+            if (sample := reply.ok) is None:
+                why = reply.err.payload.to_bytes().decode(errors="replace")  # "Timeout"
+                log.warning("gmmap transport: a peer failed to answer %s: %s", selector, why)
                 continue
             key = str(sample.key_expr)
             parsed = parse_data_key(key)
