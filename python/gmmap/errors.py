@@ -39,3 +39,12 @@ class TransportError(GmmapError):
 
 class TransportConfigError(TransportError, ValueError):
     """A bad transport configuration or argument (names, endpoints, sequence numbers, payloads)."""
+
+
+class RefusedError(GmmapError, ValueError):
+    """A message from the fleet that a robot refuses (unsigned, forged, from a revoked or
+    unknown member, oversized, over its sender's rate); ``cause`` names why, for counters."""
+
+    def __init__(self, cause: str, message: str) -> None:
+        super().__init__(message)
+        self.cause = cause

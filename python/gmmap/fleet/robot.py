@@ -46,8 +46,10 @@ from gmmap.errors import DecodeError
 from gmmap.fleet import holdings
 from gmmap.fleet.arrivals import Arrivals
 from gmmap.fleet.codec import decode, encode
+from gmmap.fleet.door import Door
 from gmmap.fleet.outbox import Budget, Outbox
-from gmmap.fleet.records import edge_of, match_of
+from gmmap.fleet.records import edge_of
+from gmmap.fleet.reload import reload
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import Transport, TransportConfig
 from gmmap.mapping.frame import Frame
@@ -116,40 +118,16 @@ class RobotNode:
         self._told_state = self._state = holdings.MAPPING
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
-        self.wire: dict[int, dict] = {}  # own seq → bytes
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
-        self.reloaded = self._reload()
+        self.door = Door(config.robot.fleet)
+        r = reload(self.store, self.mapper, self.door.inner, self.robot)
+        self.reloaded, self._pending_reload = r.held, r.pending
+        self.wire = {seq: _sizes(s, n, None) for seq, (s, n) in r.own.items()}  # own seq → bytes
+        self._changed.set()
         fleet = config.robot.fleet
         self.transport = Transport(TransportConfig(fleet, self.robot, config.transport))
         self.budget = Budget(config.robot.budget)
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
-
-    # ---- persistence ------------------------------------------------------------------------
-
-    def _reload(self) -> int:
-        """Own and received submaps and the judged edges from the store (a restart); pairs
-        never judged are judged when the stages start."""
-        held = []
-        for rec in self.store.submaps():
-            try:
-                s = decode(rec.payload)
-            except DecodeError:
-                log.warning(
-                    "%s: stored %s/%d does not decode; dropped", self.robot, rec.robot, rec.seq
-                )
-                continue
-            held.append(s)
-            if rec.own:
-                self.wire[s.seq] = _sizes(s, len(rec.payload), None)
-        self._pending_reload = self.mapper.hold(held)
-        for e in self.store.edges():
-            nodes = ((e.target_robot, e.target_seq), (e.source_robot, e.source_seq))
-            if all(n in self.mapper.submaps for n in nodes):
-                self.mapper.add_match(match_of(e))
-            else:  # one of its submaps did not decode: judged again if it arrives again
-                log.warning("%s: stored edge %s → %s lacks a submap; dropped", self.robot, *nodes)
-        self._changed.set()
-        return len(held)
 
     # ---- lifecycle --------------------------------------------------------------------------
 
