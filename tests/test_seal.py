@@ -5,8 +5,9 @@ import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from gmmap.errors import RefusedError
-from gmmap.fleet.guard import MAX_SENDERS, OTHERS, Guard, GuardOptions
+from gmmap.fleet.guard import MAX_SENDERS, OTHERS, Guard
 from gmmap.fleet.seal import OVERHEAD, open_sealed, seal
+from gmmap.fleet_options import SecurityOptions
 
 KEYS = {name: Ed25519PrivateKey.generate() for name in ("a", "b")}
 
@@ -49,14 +50,14 @@ def test_an_altered_forged_or_unsigned_message_is_refused() -> None:
 
 def test_the_guard_caps_size_and_rate_per_sender_with_bounded_memory() -> None:
     now = [0.0]
-    guard = Guard(GuardOptions(max_bytes=100, rate=2.0, burst=3), clock=lambda: now[0])
-    assert not guard.admit("a", 101)
+    guard = Guard(SecurityOptions(max_bytes=1024, rate=2.0, burst=3), clock=lambda: now[0])
+    assert not guard.admit("a", 1025)
     assert [guard.admit("a", 10) for _ in range(4)] == [True, True, True, False]
     assert guard.admit("b", 10)  # each sender has its own bucket
     now[0] = 0.5  # one token back
     assert guard.admit("a", 10) and not guard.admit("a", 10)
     assert guard.refusals.snapshot() == {"a": {"oversize": 1, "rate": 2}}
     for i in range(3 * MAX_SENDERS):  # a flood under made-up names
-        guard.admit(f"x{i}", 1000)
+        guard.admit(f"x{i}", 2000)
     counts = guard.refusals.snapshot()
     assert len(counts) == MAX_SENDERS + 1 and counts[OTHERS]["oversize"] > MAX_SENDERS

@@ -29,6 +29,7 @@ from gmmap.options import (
     PlannerOptions,
     RegisterOptions,
     RobotOptions,
+    SecurityOptions,
     SelectOptions,
     SimOptions,
     TransportOptions,
@@ -51,6 +52,7 @@ class Config:
     transport: TransportOptions = field(default_factory=TransportOptions)
     link: LinkOptions = field(default_factory=LinkOptions)
     robot: RobotOptions = field(default_factory=RobotOptions)
+    security: SecurityOptions = field(default_factory=SecurityOptions)
     planner: PlannerOptions = field(default_factory=PlannerOptions)
     sim: SimOptions = field(default_factory=SimOptions)
 

@@ -48,3 +48,26 @@ class RefusedError(GmmapError, ValueError):
     def __init__(self, cause: str, message: str) -> None:
         super().__init__(message)
         self.cause = cause
+
+
+class CredentialsError(GmmapError, ValueError):
+    """Fleet credentials that cannot be made or used (`gmmap.fleet.credentials`): a bad fleet,
+    member or role name, a fleet or member that already exists, a member that is not there."""
+
+
+class CredentialsFileError(CredentialsError, FileFormatError):
+    """A credentials file that is missing, truncated or garbage, or a key that does not match
+    its certificate."""
+
+
+class InsecureKeyError(CredentialsError):
+    """A private key file that group or others may read: refused, as ssh does (chmod 600)."""
+
+
+class UntrustedMemberError(CredentialsError):
+    """A certificate the fleet's authority did not issue (another CA, forged, tampered), is not
+    valid now (expired, not yet valid, stale CRL) or is no member certificate."""
+
+
+class RevokedMemberError(UntrustedMemberError):
+    """A member certificate that the fleet's revocation list (CRL) names."""

@@ -9,17 +9,30 @@ install can read, validate and dump a configuration.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
-from gmmap.errors import InvalidInputError, TransportConfigError
-from gmmap.names import MODES, check_endpoint, check_name
+from gmmap.errors import InvalidInputError
+from gmmap.fleet_options import LinkOptions, RobotOptions, SecurityOptions, TransportOptions
+
+__all__ = [
+    "BackendOptions",
+    "BuildOptions",
+    "LinkOptions",
+    "PlaceOptions",
+    "PlannerOptions",
+    "RegisterOptions",
+    "RobotOptions",
+    "SecurityOptions",
+    "SelectOptions",
+    "SimOptions",
+    "TransportOptions",
+    "drift_overrides",
+]
 
 STRATEGIES = ("points", "gmm-merge", "per-frame")
 COVARIANCES = ("diag", "full")
 SENSORS = ("lidar", "depth")
-TOPOLOGIES = ("mesh", "chain", "router")
 
 
 @dataclass(frozen=True)
@@ -286,83 +299,6 @@ def drift_overrides(drift: float) -> dict[str, float]:
 
 
 @dataclass(frozen=True)
-class TransportOptions:
-    """Where a robot's Zenoh session listens and whom it connects to (`gmmap.fleet.transport`).
-
-    ``listen`` None means one loopback endpoint ``tcp/127.0.0.1:<port>``; ``port`` 0 picks a free
-    ephemeral port when the transport opens. Multicast scouting is off by default so that
-    fleets on one network only meet through ``connect`` endpoints (Zenoh's gossip still lets
-    peers of peers find each other). ``zenoh_options`` are raw Zenoh configuration entries
-    (``{"transport/link/tx/lease": 5000}``) applied last.
-    """
-
-    listen: tuple[str, ...] | None = None
-    port: int = 0
-    connect: tuple[str, ...] = ()
-    mode: str = "peer"
-    multicast_scouting: bool = False
-    fetch_timeout: float = 2.0
-    zenoh_options: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise TransportConfigError(f"mode must be one of {MODES}; got {self.mode!r}")
-        if isinstance(self.port, bool) or not isinstance(self.port, int):
-            raise TransportConfigError(f"port must be an integer; got {self.port!r}")
-        if not 0 <= self.port <= 65535:
-            raise TransportConfigError(f"port must be in 0..65535; got {self.port}")
-        # Accept any sequence of strings but store tuples: the options stay immutable.
-        if self.listen is not None:
-            object.__setattr__(self, "listen", _endpoints("listen", self.listen))
-        object.__setattr__(self, "connect", _endpoints("connect", self.connect))
-        if self.mode == "client" and not self.connect:
-            raise TransportConfigError("mode 'client' needs at least one connect endpoint")
-        if not isinstance(self.fetch_timeout, (int, float)) or not self.fetch_timeout > 0:
-            raise TransportConfigError(f"fetch_timeout must be > 0 s; got {self.fetch_timeout!r}")
-        if not isinstance(self.zenoh_options, Mapping):
-            raise TransportConfigError("zenoh_options must be a mapping of key to value")
-
-
-def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
-    if isinstance(endpoints, str):
-        raise TransportConfigError(f"{what} must be a list of endpoints, not one string")
-    return tuple(check_endpoint(e, listen=what == "listen") for e in endpoints)
-
-
-@dataclass(frozen=True)
-class RobotOptions:
-    """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
-    ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
-    ``linger``: seconds it keeps receiving, matching and optimising after its frames end;
-    then it stays until the peers in reach hold what it holds and it holds what they hold, or
-    until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
-    ``rejudge``: at the end, every pair held is judged again in one call, so that the final
-    maps are an offline merge's of the same submaps, whatever order they arrived in.
-    ``budget``: bytes/s of payload and keys the robot puts on each link, submaps, adverts and
-    fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap."""
-
-    name: str = "robot"
-    fleet: str = "gmmap"
-    store: str | None = None
-    wait_for: tuple[str, ...] = ()
-    wait_timeout: float = 30.0
-    linger: float = 5.0
-    deadline: float = 120.0
-    rejudge: bool = True
-    budget: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.budget is not None and not (math.isfinite(self.budget) and self.budget > 0):
-            raise InvalidInputError(f"robot.budget must be > 0 bytes/s or null, got {self.budget}")
-        check_name("robot.name", self.name)
-        check_name("robot.fleet", self.fleet)
-        for peer in self.wait_for:
-            check_name("robot.wait_for", peer)
-        if not (self.wait_timeout >= 0 and self.linger >= 0 and self.deadline >= 0):
-            raise InvalidInputError("robot.wait_timeout, linger and deadline must be >= 0")
-
-
-@dataclass(frozen=True)
 class PlannerOptions:
     """Robot size and the planner's rule (`gmmap.mapping.planner`). Heights are in the map frame
     (floor at z = 0)."""
@@ -388,77 +324,6 @@ class PlannerOptions:
             raise InvalidInputError("directions must be an even number >= 4")
         if not 0 < self.max_occupancy < 1:
             raise InvalidInputError("max_occupancy must be in (0, 1)")
-
-
-@dataclass(frozen=True)
-class LinkOptions:
-    """Emulated links between the demo's robots (`gmmap.fleet.links`).
-
-    With ``emulate`` (or any shaping set) each pair of robots talks through its own relay,
-    which counts every byte Zenoh puts on the link and, in both directions: caps it at
-    ``rate`` bytes/s (None: no cap), delays it by ``delay_s``, stalls a chunk for ``stall_s``
-    with probability ``loss`` (TCP's retransmission after a loss) and moves nothing during the
-    ``outages``, (start, end) seconds after the relays start. ``topology``: ``mesh``, a link
-    between every two robots; ``chain``, robot i linked to i + 1 only, so that the others'
-    submaps reach a robot only through those in between; ``router``, every robot a Zenoh
-    client of one Zenoh router, linked to it alone (the topology of larger fleets).
-
-    Rendezvous links (mesh or chain, simulated robots): a link is up only while its robots are
-    within ``range_m`` metres and, with ``line_of_sight``, nothing of the world stands between.
-    """
-
-    emulate: bool = False
-    rate: float | None = None
-    delay_s: float = 0.0
-    loss: float = 0.0
-    stall_s: float = 0.2
-    outages: tuple[tuple[float, float], ...] = ()
-    seed: int = 0
-    topology: str = "mesh"
-    range_m: float | None = None
-    line_of_sight: bool = False
-
-    def __post_init__(self) -> None:
-        if self.topology not in TOPOLOGIES:
-            raise InvalidInputError(f"link.topology must be one of {TOPOLOGIES}")
-        if self.range_m is not None and not (math.isfinite(self.range_m) and self.range_m > 0):
-            raise InvalidInputError(f"link.range_m must be > 0 m or null, got {self.range_m}")
-        if self.rendezvous and self.topology == "router":
-            raise InvalidInputError("rendezvous links need link.topology mesh or chain")
-        if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
-            raise InvalidInputError(f"link.rate must be > 0 bytes/s or null, got {self.rate}")
-        for name in ("delay_s", "stall_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise InvalidInputError(f"link.{name} must be finite and >= 0, got {value}")
-        if not 0 <= self.loss < 1:
-            raise InvalidInputError(f"link.loss must be in [0, 1), got {self.loss}")
-        for window in self.outages:
-            if len(window) != 2 or not 0 <= window[0] < window[1]:
-                raise InvalidInputError(f"link.outages: (start, end), 0 <= start < end: {window}")
-
-    @property
-    def shaped(self) -> bool:
-        """Whether the robots talk through relays."""
-        shaping = self.rate or self.delay_s or self.loss or self.outages or self.rendezvous
-        return self.emulate or bool(shaping) or self.topology != "mesh"
-
-    @property
-    def rendezvous(self) -> bool:
-        """Whether links are up only while their robots are in reach of each other."""
-        return self.range_m is not None or self.line_of_sight
-
-    def pairs(self, n: int) -> list[tuple[int, int]]:
-        """The linked pairs (i < j) of ``n`` robots; with a router, it is number n."""
-        if self.topology == "router":
-            return [(i, n) for i in range(n)]
-        if self.topology == "chain":
-            return [(i, i + 1) for i in range(n - 1)]
-        return [(i, j) for i in range(n) for j in range(i + 1, n)]
-
-    def outage_end(self, t: float) -> float | None:
-        """The end of the outage under way ``t`` seconds after the start, or None."""
-        return next((end for start, end in self.outages if start <= t < end), None)
 
 
 @dataclass(frozen=True)

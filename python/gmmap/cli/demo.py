@@ -35,7 +35,8 @@ from gmmap.cli.common import (
 )
 from gmmap.config import Config
 from gmmap.eval.fleetplots import DESCRIPTOR_BYTES
-from gmmap.options import TOPOLOGIES, SimOptions, drift_overrides
+from gmmap.fleet_options import TOPOLOGIES
+from gmmap.options import SimOptions, drift_overrides
 
 RENDEZVOUS_PACE = 2.0  # the robots' pace on rendezvous links: twice as fast as they drive
 STARTUP_S = 3.0  # from launching the robot processes to their first frame, on rendezvous links
@@ -319,6 +320,8 @@ def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOption
             for n, r in sorted(reports.items())
         },
         "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
+        "secure": all(r.get("secure", False) for r in reports.values()),
+        "refused": {n: r.get("refused", {}) for n, r in sorted(reports.items())},
         "bytes_sent": _totals(reports, "sent"),
         "bytes_received": _totals(reports, "received"),
         "resources": {n: r.get("resources") for n, r in sorted(reports.items())},

@@ -13,8 +13,9 @@ from __future__ import annotations
 import logging
 
 from gmmap.errors import RefusedError
-from gmmap.fleet.guard import Guard, GuardOptions, Refusals
+from gmmap.fleet.guard import Guard, Refusals
 from gmmap.fleet.seal import OVERHEAD, open_sealed, seal
+from gmmap.fleet_options import SecurityOptions
 
 log = logging.getLogger(__name__)
 
@@ -22,11 +23,11 @@ log = logging.getLogger(__name__)
 class Door:
     """One robot's admission and sealing; ``credentials`` None: an unsecured fleet."""
 
-    def __init__(self, fleet: str, credentials=None, guard: GuardOptions | None = None) -> None:
+    def __init__(self, fleet: str, options: SecurityOptions | None = None, credentials=None):
         self.fleet = fleet
         self.credentials = credentials
         self.refusals = Refusals()
-        self.guard = Guard(guard, self.refusals)
+        self.guard = Guard(options, self.refusals)
 
     @property
     def secure(self) -> bool:

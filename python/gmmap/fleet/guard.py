@@ -1,5 +1,6 @@
-"""Hostile input at a robot's door: a size cap per message, a rate limit per sending robot,
-and counters of everything refused, by robot and cause (`Refusals`).
+"""Hostile input at a robot's door: a size cap per message, a rate limit per sending robot
+(`SecurityOptions`: ``max_bytes``, ``rate``, ``burst``), and counters of everything refused,
+by robot and cause (`Refusals`).
 
 Both bounds keep a flood from costing more than it brings: a message over ``max_bytes`` is
 dropped before it is parsed or queued, and a sender over its rate (a token bucket: ``rate``
@@ -14,21 +15,11 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+
+from gmmap.fleet_options import SecurityOptions
 
 MAX_SENDERS = 256
 OTHERS = "*"  # the shared entry of senders beyond MAX_SENDERS
-
-
-@dataclass(frozen=True)
-class GuardOptions:
-    """``max_bytes`` per message; ``rate`` messages/s and ``burst`` per sender (None: no
-    limit). A submap is about 1 kB, and a robot sends a few a second at most, fetch replies
-    included."""
-
-    max_bytes: int = 256 * 1024
-    rate: float | None = 50.0
-    burst: int = 500
 
 
 class Refusals:
@@ -59,11 +50,11 @@ class Guard:
 
     def __init__(
         self,
-        options: GuardOptions | None = None,
+        options: SecurityOptions | None = None,
         refusals: Refusals | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.options = options or GuardOptions()
+        self.options = options or SecurityOptions()
         self.refusals = refusals or Refusals()
         self._clock = clock
         self._lock = threading.Lock()

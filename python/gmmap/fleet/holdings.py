@@ -84,6 +84,7 @@ class Holdings:
         self._peers: dict[str, Advert] = {}
         self._met: set[str] = set()
         self._fresh: set[str] = set()  # joined, and no advert from it since
+        self._seqs: dict[str, int] = {}  # the number of each peer's latest advert
 
     def meet(self, peer: str) -> None:
         """A peer joined: from now on it is waited for until it says it is done."""
@@ -99,12 +100,19 @@ class Holdings:
                 self._fresh.discard(peer)
         return first
 
-    def update(self, peer: str, payload: bytes) -> bool:
+    def update(self, peer: str, payload: bytes, seq: int | None = None) -> bool:
+        """Takes ``peer``'s advert number ``seq``; False (ignored) if it is not one, or not
+        newer than the last taken (a replay, or one overtaken on the way)."""
         advert = decode(payload)
-        if advert is not None:
-            with self._lock:
-                self._peers[peer] = advert
-        return advert is not None
+        if advert is None:
+            return False
+        with self._lock:
+            if seq is not None and seq <= self._seqs.get(peer, -1):
+                return False
+            self._peers[peer] = advert
+            if seq is not None:
+                self._seqs[peer] = seq
+        return True
 
     def adverts(self) -> dict[str, dict[str, int]]:
         """The latest counts each peer told."""

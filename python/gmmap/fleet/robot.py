@@ -114,7 +114,8 @@ class RobotNode:
         self._busy = 0  # inbox items taken and not finished, and a running optimisation
         self.arrivals = Arrivals()  # what arrived of each robot: where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
-        self._adverts, self._told_at, self._told = 0, 0.0, {}
+        # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
+        self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
         self._told_state = self._state = holdings.MAPPING
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
@@ -223,7 +224,8 @@ class RobotNode:
         with self._lock:  # the lingering node and a peer's join both advertise
             self._told, self._told_at, self._told_state = counts, time.monotonic(), state
             seq, self._adverts = self._adverts, self._adverts + 1
-        self.outbox.put(holdings.KIND, seq, holdings.encode(counts, state, self.transport.peers()))
+        advert = holdings.encode(counts, state, self.transport.peers())
+        self.outbox.put(holdings.KIND, seq, self.door.seal(self.robot, holdings.KIND, seq, advert))
 
     def _publish(self, kind: str, seq: int, payload: bytes) -> None:
         """The outbox's way out (its thread): a submap counts as sent once published."""
@@ -286,7 +288,7 @@ class RobotNode:
             log.exception("%s: construction failed", self.robot)
 
     def _emit(self, s: Submap, consumed: int) -> None:
-        payload = encode(s)
+        payload = self.door.seal(self.robot, KIND, s.seq, encode(s))
         self.store.put_submap(
             self.robot, s.seq, payload, own=True, meta={META_FRAMES: str(consumed)}
         )
@@ -309,10 +311,12 @@ class RobotNode:
         self.inbox.put(item)
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
+        if not self.door.admit(robot, kind, seq, payload):
+            return
         if kind == KIND:
-            self.arrivals.add(robot, seq, direct=True)
-            self._enqueue(Arrived("received", robot, seq, payload))
-        elif kind == holdings.KIND and self.holdings.update(robot, payload):
+            if self.arrivals.add(robot, seq, direct=True):  # else a duplicate, or a replay
+                self._enqueue(Arrived("received", robot, seq, payload))
+        elif kind == holdings.KIND and self.holdings.update(robot, self.door.inner(payload), seq):
             wanted = holdings.wanted({robot: self.holdings.adverts()[robot]}, self._held())
             # After its first advert since it joined, only what it alone can hand on to us.
             if not self.holdings.caught_up(robot):
@@ -361,7 +365,8 @@ class RobotNode:
                 self._enqueue_fetched(r, seq, payload)
 
     def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
-        if not self.arrivals.add(robot, seq):
+        # A relay's reply too must carry the owner's seal.
+        if not self.door.admit(robot, KIND, seq, payload) or not self.arrivals.add(robot, seq):
             return
         self.counts["fetched"] += 1
         self._enqueue(Arrived("fetched", robot, seq, payload))
@@ -392,11 +397,11 @@ class RobotNode:
         """The decoded submap of ``item``, stored if received; None if held or bad."""
         key = (item.robot, item.seq)
         if item.origin == "own":
-            return decode(item.payload)
+            return decode(self.door.inner(item.payload))
         if key in self.mapper.submaps:
             return None
         try:
-            s = decode(item.payload)
+            s = decode(self.door.inner(item.payload))
         except DecodeError as err:
             self.counts["decode_errors"] += 1
             log.warning("%s: %s/%d does not decode: %s", self.robot, *key, err)

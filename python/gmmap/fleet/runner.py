@@ -98,6 +98,8 @@ def node_report(node: RobotNode) -> dict:
         "frames_consumed": node.frames_consumed,
         **{f"submaps_{k}": node.counts[k] for k in ("built", "sent", "received", "fetched")},
         "decode_errors": node.counts["decode_errors"],
+        "secure": node.door.secure,
+        "refused": node.door.refusals.snapshot(),  # by sending robot and cause
         "reloaded": node.reloaded,
         "held": {r: sum(1 for x, _ in held if x == r) for r in robots},
         "bytes": {
