@@ -22,7 +22,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import click
-import numpy as np
 
 from gmmap.cli.common import (
     BUDGET,
@@ -34,9 +33,11 @@ from gmmap.cli.common import (
     sim_settings,
 )
 from gmmap.config import Config
-from gmmap.eval.fleetplots import DESCRIPTOR_BYTES
+from gmmap.errors import InvalidInputError
+from gmmap.eval.fleetrun import summarise
+from gmmap.fleet.access import secured
 from gmmap.fleet_options import TOPOLOGIES
-from gmmap.options import SimOptions, drift_overrides
+from gmmap.options import drift_overrides
 
 RENDEZVOUS_PACE = 2.0  # the robots' pace on rendezvous links: twice as fast as they drive
 STARTUP_S = 3.0  # from launching the robot processes to their first frame, on rendezvous links
@@ -48,11 +49,14 @@ def run_demo(
     out: Path | None = None,
     log=print,
     crash: tuple[int, int] | None = None,
+    secure: bool = False,
 ) -> dict:
     """Runs ``config.sim.robots`` robot processes, each started with its own configuration
     file (this tree with its name, store and endpoints), and summarises their reports.
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
-    and started again on its store."""
+    and started again on its store. ``secure``: a new fleet authority and credentials for each
+    robot in ``out/fleet``, TLS links, access control and sealed submaps
+    (`gmmap.fleet.access`)."""
     # The robots run in this interpreter: a missing fleet extra is named here, not in n logs.
     import zenoh  # noqa: F401
 
@@ -73,6 +77,7 @@ def run_demo(
     ports = [listen_port() for _ in names]
     fleet = f"demo{os.getpid()}"
     config.save(out)
+    members = _credentials(config, out / "fleet", fleet, names) if secure else {}
     procs: list[subprocess.Popen] = []
     readers: list[threading.Thread] = []
     router = None
@@ -86,6 +91,8 @@ def run_demo(
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
         own = _robot_config(config, i, names, ports, fleet, out, relays, reach)
+        if secure:
+            own = secured(own, members[name])
         cmd = [
             sys.executable, "-c", "from gmmap.cli import main; main()", "robot",
             "--config", str(own.save(out / f"{name}.yaml")), "--sim", "--sim-index", str(i),
@@ -157,6 +164,19 @@ def rendezvous(config: Config, max_frames: int | None = None):
     sight = run[0].world.in_sight if link.line_of_sight else None
     tracks = [r.gt_poses[:, :3, 3] for r in run]
     return Rendezvous(tracks, link.range_m, sight, sim.start, sim.rate * sim.pace)
+
+
+def _credentials(config: Config, folder: Path, fleet: str, names: list[str]) -> dict:
+    """A new fleet authority in ``folder`` (an earlier run's is replaced) and each robot's
+    member folder."""
+    import shutil
+
+    from gmmap.fleet.access import issue_fleet
+
+    if config.link.topology == "router":
+        raise InvalidInputError("--secure runs mesh or chain links; the router is not secured")
+    shutil.rmtree(folder, ignore_errors=True)
+    return issue_fleet(folder, fleet, names)
 
 
 def _start_relays(config: Config, ports: list[int], reach=None) -> dict:
@@ -278,58 +298,6 @@ def _relay(proc: subprocess.Popen, log) -> None:
     err.join(timeout=5)
 
 
-def summarise(reports: dict[str, dict], anchors: dict[str, dict], sim: SimOptions) -> dict:
-    """The demo's report from the robots' reports, their anchors' ground truth (``anchors``:
-    robot → seq → 4x4) and the simulator's map frames."""
-    from gmmap.eval.pairs import match_errors, pair_errors
-    from gmmap.io.sim import simulate_options
-
-    truth = {r.name: r.map_to_world for r in simulate_options(sim)}
-    # The view of the robot that holds the most (ties: the lowest name): it has every match.
-    view = max(sorted(reports), key=lambda n: sum(reports[n]["held"].values()))
-    v = reports[view]
-    groups = v["groups"]
-    truth_anchors, poses, kept = _anchors(reports, anchors, view)
-    to_reference = {n: np.array(T) for n, T in v["to_reference"].items()}
-    pairs = pair_errors(groups, reports, poses, truth_anchors, kept, to_reference, truth)
-    subs = [s for r in reports.values() for s in r["submaps"] if s["points_float32"]]
-    wire = float(np.mean([s["wire"] for s in subs]))
-    points = float(np.mean([s["points_float32"] for s in subs]))
-    gmm = float(np.mean([s["gmm_float32"] for s in subs])) + DESCRIPTOR_BYTES
-    return {
-        "robots": sim.robots,
-        "world": sim.world,
-        "groups": groups,
-        "view": view,
-        "submaps": len(subs),
-        "bytes_per_submap": {
-            "wire": wire,
-            "points_float32": points,
-            "gmm_float32_plus_descriptor": gmm,
-        },
-        "reduction_vs_points": points / wire,
-        "reduction_vs_gmm_float32_plus_descriptor": gmm / wire,
-        "pairs": pairs,
-        "matches": {
-            n: {
-                "accepted": r["matches_accepted"],
-                "rejected": r["matches_rejected"],
-                "backend_accepted": r["backend_accepted"],
-                "backend_rejected": r["backend_rejected"],
-            }
-            for n, r in sorted(reports.items())
-        },
-        "received": {n: r["submaps_received"] for n, r in sorted(reports.items())},
-        "secure": all(r.get("secure", False) for r in reports.values()),
-        "refused": {n: r.get("refused", {}) for n, r in sorted(reports.items())},
-        "bytes_sent": _totals(reports, "sent"),
-        "bytes_received": _totals(reports, "received"),
-        "resources": {n: r.get("resources") for n, r in sorted(reports.items())},
-        # every robot's kept registrations, and the view's as optimised there
-        "match_errors": match_errors(_registered(reports), kept, poses, truth_anchors),
-    }
-
-
 def _reach_losses(config: Config, reach, names: list[str], out: Path) -> tuple:
     """On rendezvous links (``reach``), per robot its submaps a peer in reach after them never
     got (lost) and those no peer could reach (`gmmap.eval.delivery`), from the robots' stores."""
@@ -338,39 +306,6 @@ def _reach_losses(config: Config, reach, names: list[str], out: Path) -> tuple:
     n = len(names)
     linked = links_up(reach.up, config.link.pairs(n), n, reach.frames)
     return lost_in_reach({name: out / f"{name}.sqlite" for name in names}, linked, reach.frame)
-
-
-def _totals(reports: dict[str, dict], direction: str) -> dict:
-    """Payload bytes each robot sent or received (all kinds, fetches included)."""
-    return {
-        n: r["bytes"]["totals"].get(direction, {}).get("payload_bytes")
-        for n, r in sorted(reports.items())
-    }
-
-
-def _anchors(reports: dict[str, dict], anchors: dict[str, dict], view: str):
-    """True anchors (every robot's own), ``view``'s optimised poses and its kept match nodes."""
-    truth = {
-        (name, int(seq)): np.array(T) for name, own in anchors.items() for seq, T in own.items()
-    }
-    poses = {(k.rsplit("/", 1)[0], int(k.rsplit("/", 1)[1])): np.array(P)
-             for k, P in reports[view]["poses"].items()}  # fmt: skip
-    kept = [(tuple(e["target"]), tuple(e["source"])) for e in _kept(reports[view])]
-    return truth, poses, kept
-
-
-def _kept(report: dict):
-    return (e for e in report.get("edges", []) if e.get("backend") == "accepted")
-
-
-def _registered(reports: dict[str, dict]) -> list:
-    """Every robot's kept registrations (target, source, transform), each node pair once."""
-    once = {}
-    for r in reports.values():
-        for e in _kept(r):
-            t, s = tuple(e["target"]), tuple(e["source"])
-            once[frozenset({t, s})] = (t, s, np.array(e["transform"]))
-    return list(once.values())
 
 
 def format_report(r: dict) -> str:
@@ -458,35 +393,32 @@ def format_report(r: dict) -> str:
     type=click.Path(file_okay=False, path_type=Path),
     help="Write bytes over time (the paper's Fig. 9) and map completeness PNGs here.",
 )
+@click.option(
+    "--secure",
+    is_flag=True,
+    help="Fresh fleet credentials in OUT/fleet: mutual TLS, access control, signed submaps.",
+)
 @config_option
 @as_json_option
 def command(
-    max_frames: int | None, out: Path | None, plots: Path | None, config: Config, as_json: bool
+    max_frames: int | None,
+    out: Path | None,
+    plots: Path | None,
+    secure: bool,
+    config: Config,
+    as_json: bool,
 ) -> None:
     """Simulated robots as separate processes share GMM submaps over Zenoh and merge maps.
 
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
     config = backend_follows_drift(config)
-    r = run_demo(config, max_frames, out, log)
+    r = run_demo(config, max_frames, out, log, secure=secure)
     if plots:
+        from gmmap.eval.fleetplots import write_plots
+
         r["plots"] = write_plots(Path(r["out"]), list(r["received"]), plots)
     click.echo(json.dumps(r) if as_json else format_report(r))
-
-
-def write_plots(out: Path, names: list[str], folder: Path) -> list[str]:
-    """The demo's bytes over time (the paper's Fig. 9) and each robot's map completeness over
-    time, as PNGs in ``folder``."""
-    from gmmap.eval.fleetplots import completeness, plot_bytes, plot_completeness
-
-    folder.mkdir(parents=True, exist_ok=True)
-    stores = {n: out / f"{n}.sqlite" for n in names}
-    reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
-    paths = [
-        plot_bytes(reports, stores, folder / "bytes.png"),
-        plot_completeness(completeness(stores), folder / "completeness.png", "each robot"),
-    ]
-    return [str(p) for p in paths]
 
 
 def backend_follows_drift(config: Config) -> Config:

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -84,3 +85,16 @@ def plot_bytes(reports: Mapping[str, dict], stores: Mapping[str, Path], path: Pa
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def write_plots(out: Path, names: list[str], folder: Path) -> list[str]:
+    """The demo's bytes over time (the paper's Fig. 9) and each robot's map completeness over
+    time, as PNGs in ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    stores = {n: out / f"{n}.sqlite" for n in names}
+    reports = {n: json.loads((out / f"{n}.json").read_text()) for n in names}
+    paths = [
+        plot_bytes(reports, stores, folder / "bytes.png"),
+        plot_completeness(completeness(stores), folder / "completeness.png", "each robot"),
+    ]
+    return [str(p) for p in paths]

@@ -23,8 +23,11 @@ let in by a robot once that robot restarts on the refreshed roster.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
+from gmmap.config import Config
 from gmmap.fleet.keys import PREFIX
 
 READ = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
@@ -90,3 +93,25 @@ def _rule(rule_id: str, flow: str, keys: list[str], messages: list[str]) -> dict
         "key_exprs": keys,
         "messages": messages,
     }
+
+
+def secured(config: Config, credentials: Path) -> Config:
+    """``config`` for the member whose folder is ``credentials``: its TLS endpoints in place of
+    TCP ones (a relay in between carries TLS as it carries TCP)."""
+
+    def tls(endpoints):
+        return None if endpoints is None else tuple(e.replace("tcp/", "tls/", 1) for e in endpoints)
+
+    t = config.transport
+    transport = replace(t, listen=tls(t.listen), connect=tls(t.connect))
+    security = replace(config.security, credentials=str(credentials))
+    return replace(config, transport=transport, security=security)
+
+
+def issue_fleet(folder: Path, fleet: str, robots: list[str]) -> dict[str, Path]:
+    """A new fleet authority in ``folder`` with one member folder per robot (``gmmap demo
+    --secure``, tests): robot name → its folder."""
+    from gmmap.fleet.credentials import add_member, init_fleet
+
+    init_fleet(folder, fleet)
+    return {name: add_member(folder, name) for name in robots}

@@ -48,6 +48,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from cryptography.x509.oid import NameOID
 
 from gmmap.errors import (
+    CredentialsError,
     CredentialsFileError,
     RefusedError,
     RevokedMemberError,
@@ -101,6 +102,7 @@ __all__ = [
     "init_fleet",
     "load",
     "load_authority",
+    "load_for",
     "refresh_crl",
     "revoke",
     "verify_member",
@@ -251,3 +253,13 @@ def load(member_dir: Path) -> Credentials:
         info["fleet"], member.name, member.role, folder, key_path, tls_path, cert_path,
         folder / CA_CERT, folder / CRL, ca, cert, crl, signing, roster,
     )  # fmt: skip
+
+
+def load_for(member_dir: Path, fleet: str, name: str) -> Credentials:
+    """`load`, and `CredentialsError` unless the folder is ``name``'s of ``fleet``."""
+    c = load(member_dir)
+    if (c.fleet, c.name) != (fleet, name):
+        raise CredentialsError(
+            f"{member_dir} holds {c.name!r} of fleet {c.fleet!r}, not {name!r} of {fleet!r}"
+        )
+    return c

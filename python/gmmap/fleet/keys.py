@@ -82,3 +82,12 @@ def parse_fetch(key: str, since: str | None) -> tuple[str, str, str, int] | None
     if not since_text.isdigit():
         return None
     return fleet, robot, kind, int(since_text)
+
+
+def as_payload(payload: object) -> bytes:
+    """A message's payload as bytes; `TransportConfigError` for anything not bytes-like."""
+    if isinstance(payload, bytes):
+        return payload
+    if isinstance(payload, (bytearray, memoryview)):
+        return bytes(payload)
+    raise TransportConfigError(f"payload must be bytes; got {type(payload).__name__}")

@@ -46,6 +46,7 @@ from gmmap.errors import DecodeError
 from gmmap.fleet import holdings
 from gmmap.fleet.arrivals import Arrivals
 from gmmap.fleet.codec import decode, encode
+from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of
@@ -120,13 +121,17 @@ class RobotNode:
         self._closed = False
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
-        self.door = Door(config.robot.fleet)
+        c = config.security.credentials
+        credentials = None if c is None else load_for(Path(c), config.robot.fleet, self.robot)
+        self.door = Door(config.robot.fleet, config.security, credentials)
         r = reload(self.store, self.mapper, self.door.inner, self.robot)
         self.reloaded, self._pending_reload = r.held, r.pending
         self.wire = {seq: _sizes(s, n, None) for seq, (s, n) in r.own.items()}  # own seq → bytes
         self._changed.set()
         fleet = config.robot.fleet
-        self.transport = Transport(TransportConfig(fleet, self.robot, config.transport))
+        self.transport = Transport(
+            TransportConfig(fleet, self.robot, config.transport, credentials)
+        )
         self.budget = Budget(config.robot.budget)
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
 

@@ -17,14 +17,18 @@ from typing import Any
 import zenoh
 
 from gmmap.errors import TransportConfigError, TransportError
+from gmmap.fleet.access import acl, tls_entries
 from gmmap.fleet.keys import free_port
 from gmmap.options import TransportOptions
 
 LEASE = {"transport/link/tx/lease": 30_000}  # ms
 
 
-def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -> zenoh.Config:
-    """The Zenoh configuration of a robot's session; `TransportConfigError` for a bad option."""
+def zenoh_config(
+    options: TransportOptions, listen_endpoints: tuple[str, ...], credentials=None
+) -> zenoh.Config:
+    """The Zenoh configuration of a robot's session, secured where ``credentials`` are given
+    (`gmmap.fleet.access`); `TransportConfigError` for a bad option."""
     cfg = zenoh.Config()
     entries: dict[str, Any] = {
         "mode": options.mode,
@@ -33,6 +37,13 @@ def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -
         "scouting/multicast/enabled": options.multicast_scouting,
         **LEASE,
     }
+    if credentials is not None:
+        plain = [e for e in (*listen_endpoints, *options.connect) if not e.startswith("tls/")]
+        if plain:
+            raise TransportConfigError(f"a secured robot's endpoints are tls/…; got {plain}")
+        c = credentials
+        entries.update(tls_entries(str(c.ca_path), str(c.cert_path), str(c.tls_key_path)))
+        entries["access_control"] = acl(c.fleet, roster(c))
     entries.update(options.zenoh_options)
     for key, value in entries.items():
         try:
@@ -42,19 +53,29 @@ def zenoh_config(options: TransportOptions, listen_endpoints: tuple[str, ...]) -
     return cfg
 
 
-def open_session(robot: str, options: TransportOptions) -> tuple[zenoh.Session, tuple[str, ...]]:
+def roster(credentials) -> dict[str, str]:
+    """Member name → role: the members a robot knows (revoked ones left out) and itself."""
+    members = {n: m.role for n in credentials.roster.names() if (m := credentials.roster.get(n))}
+    return {**members, credentials.name: credentials.role}
+
+
+def open_session(
+    robot: str, options: TransportOptions, credentials=None
+) -> tuple[zenoh.Session, tuple[str, ...]]:
     """The open session of ``robot`` and the endpoints it listens on; `TransportError` when
     Zenoh cannot open it."""
     # A port we pick ourselves may be taken between free_port() and Zenoh's bind: retry.
     attempts = 3 if options.listen is None and options.port == 0 else 1
+    protocol = "tcp" if credentials is None else "tls"
     for attempt in range(attempts):
         listen_endpoints = (
             options.listen
             if options.listen is not None  # () listens nowhere (connects only)
-            else (f"tcp/127.0.0.1:{options.port or free_port()}",)
+            else (f"{protocol}/127.0.0.1:{options.port or free_port()}",)
         )
         try:
-            return zenoh.open(zenoh_config(options, listen_endpoints)), listen_endpoints
+            config = zenoh_config(options, listen_endpoints, credentials)
+            return zenoh.open(config), listen_endpoints
         except zenoh.ZError as err:
             if attempt + 1 == attempts:
                 raise TransportError(

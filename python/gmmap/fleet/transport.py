@@ -53,6 +53,7 @@ from gmmap.fleet.counters import ByteCount, Counters
 from gmmap.fleet.keys import (
     PREFIX,
     alive_key,
+    as_payload,
     check_seq,
     data_key,
     free_port,
@@ -97,11 +98,13 @@ Roster = Callable[[], Iterable[str]]
 
 @dataclass(frozen=True)
 class TransportConfig:
-    """A robot's name in its fleet and its transport options."""
+    """A robot's name in its fleet, its transport options and, in a secured fleet, its
+    credentials (`gmmap.fleet.credentials`: TLS and access control, `gmmap.fleet.access`)."""
 
     fleet: str
     robot: str
     options: TransportOptions = field(default_factory=TransportOptions)
+    credentials: Any = None
 
     def __post_init__(self) -> None:
         check_name("fleet", self.fleet)
@@ -143,12 +146,16 @@ class Transport:
         self._queryable: Any = None
         self._probes: dict[str, zenoh.Publisher] = {}
         self._closed = False
-        self._session, self.listen_endpoints = open_session(self.robot, config.options)
+        self._session, self.listen_endpoints = open_session(
+            self.robot, config.options, config.credentials
+        )
         self._events = Worker(f"gmmap-transport-events-{self.robot}")
         self._queries = Worker(f"gmmap-transport-queries-{self.robot}")
         try:
             liveliness = self._session.liveliness()
-            self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
+            # A station watches: it is not a robot its peers would wait for.
+            if getattr(config.credentials, "role", None) != "station":
+                self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
             self._alive_subscriber = liveliness.declare_subscriber(
                 f"{PREFIX}/{self.fleet}/*", self._on_liveliness, history=True
             )
@@ -197,7 +204,7 @@ class Transport:
         self._check_open()
         check_name("kind", kind)
         check_seq(seq)
-        data = _as_bytes(payload)
+        data = as_payload(payload)
         key = data_key(self.fleet, self.robot, kind, seq)
         try:
             self._session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -375,7 +382,7 @@ class Transport:
                 return
             held = sorted(h for h in held if isinstance(h[1], int) and h[1] >= since)
             for r, seq, payload in held:  # oldest first: a fetch cut short resumes at its gap
-                data, key = _as_bytes(payload), data_key(self.fleet, r, kind, seq)
+                data, key = as_payload(payload), data_key(self.fleet, r, kind, seq)
                 if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
                     return
                 query.reply(key, data)
@@ -490,11 +497,3 @@ class Transport:
          "ignored":  n}
         """
         return {"fleet": self.fleet, "robot": self.robot, **self._counters.snapshot()}
-
-
-def _as_bytes(payload: object) -> bytes:
-    if isinstance(payload, bytes):
-        return payload
-    if isinstance(payload, (bytearray, memoryview)):
-        return bytes(payload)
-    raise TransportConfigError(f"payload must be bytes; got {type(payload).__name__}")
