@@ -41,6 +41,11 @@ from gmmap.config import Config
 @setting("--peer", "transport.connect", "Zenoh endpoint of another robot.", multiple=True)
 @setting("--wait-for", "robot.wait_for", "Wait for these robots before mapping.", multiple=True)
 @setting("--store", "robot.store", "The robot's SQLite store (default: temporary).")
+@setting(
+    "--credentials",
+    "security.credentials",
+    "This robot's folder from gmmap fleet add: TLS, access control, signed submaps.",
+)
 @FRAMES_PER_SUBMAP
 @setting("--components", "build.n_components", "Components fitted.", type=int)
 @COVARIANCE
@@ -86,6 +91,8 @@ def command(
     from gmmap.fleet.robot import Built
     from gmmap.fleet.runner import run_robot
 
+    if config.security.credentials is None:
+        log(f"{config.robot.name}: plain TCP, submaps unsigned (no --credentials: a trusted lab)")
     frames = pick(_frames(data, simulated, sim_index, stride, config))
     truth: dict[str, list] = {}
 

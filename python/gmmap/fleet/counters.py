@@ -8,6 +8,9 @@ import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
+MAX_ENTRIES = 1024  # (direction, robot, kind) counted apart; beyond, all under "*"
+OTHERS = "*"
+
 
 @dataclass
 class ByteCount:
@@ -44,9 +47,10 @@ class Counters:
 
     def add(self, direction: str, robot: str, kind: str, payload: int, key: int, fetched: bool):
         with self._lock:
-            self._counts.setdefault((direction, robot, kind), ByteCount()).add(
-                payload, key, fetched
-            )
+            at = (direction, robot, kind)
+            if at not in self._counts and len(self._counts) >= MAX_ENTRIES:
+                at = (direction, OTHERS, OTHERS)  # a flood under made-up names stays bounded
+            self._counts.setdefault(at, ByteCount()).add(payload, key, fetched)
 
     def bump(self, name: str) -> None:
         with self._lock:

@@ -5,7 +5,8 @@ by robot and cause (`Refusals`).
 Both bounds keep a flood from costing more than it brings: a message over ``max_bytes`` is
 dropped before it is parsed or queued, and a sender over its rate (a token bucket: ``rate``
 messages a second, ``burst`` at once) is dropped until its bucket refills, so the inbox grows
-at most by what the honest rate allows. What is tracked per sender is bounded too
+at most by what the honest rate allows; all senders together get FLEET_SHARE times one
+sender's rate and burst. What is tracked per sender is bounded too
 (``MAX_SENDERS``): names beyond it share one bucket and one counter, ``"*"``, so a flood under
 made-up names cannot grow the robot's memory.
 """
@@ -20,6 +21,8 @@ from gmmap.fleet_options import SecurityOptions
 
 MAX_SENDERS = 256
 OTHERS = "*"  # the shared entry of senders beyond MAX_SENDERS
+ALL = ""  # the bucket of all senders together
+FLEET_SHARE = 8  # all senders together may send as much as this many at their rate
 
 
 class Refusals:
@@ -77,8 +80,14 @@ class Guard:
         with self._lock:
             if robot not in self._buckets and len(self._buckets) >= MAX_SENDERS:
                 robot = OTHERS
-            tokens, at = self._buckets.get(robot, (burst, now))
-            tokens = min(burst, tokens + (now - at) * rate)
-            ok = tokens >= 1.0
-            self._buckets[robot] = (tokens - 1.0 if ok else tokens, now)
+            # All senders together too: a flood under many names is held to FLEET_SHARE senders.
+            ok = self._spend(ALL, now, rate * FLEET_SHARE, burst * FLEET_SHARE, False)
+            ok = self._spend(robot, now, rate, burst, not ok) and ok
+        return ok
+
+    def _spend(self, bucket: str, now: float, rate: float, burst: float, dry: bool) -> bool:
+        tokens, at = self._buckets.get(bucket, (burst, now))
+        tokens = min(burst, tokens + (now - at) * rate)
+        ok = tokens >= 1.0 and not dry
+        self._buckets[bucket] = (tokens - 1.0 if ok else tokens, now)
         return ok
