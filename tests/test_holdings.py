@@ -100,3 +100,11 @@ def test_news_is_told_to_peers_only_when_it_changes_what_they_conclude() -> None
     assert h.is_news({"a": 3, "b": 3}, told, LINGER, ["p"])  # p can fetch b's third from us
     assert not h.is_news({"a": 6, "b": 1}, told, LINGER, ["p"])  # a reaches p itself
     assert not h.is_news({"a": 5, "b": 2}, told, LINGER, [])  # p lingers, but is gone
+
+
+def test_a_robot_relays_for_a_peer_that_does_not_hear_all_it_holds() -> None:
+    h = Holdings()
+    h.update("p", encode({"a": 1}, LINGER, reach=["a", "q"]))
+    assert not h.relaying({"a": 2, "q": 1}, ["p"])  # p hears a and q itself
+    assert h.relaying({"a": 2, "r": 1}, ["p"])  # only we can hand r's on to p
+    assert not h.relaying({"a": 2, "r": 1}, [])  # p is gone

@@ -144,6 +144,14 @@ class Holdings:
                 return True
         return False
 
+    def relaying(self, mine: Mapping[str, int], present: Iterable[str]) -> bool:
+        """Whether a present peer does not hear directly some robot we hold: we may be its
+        way to that robot's submaps (a chain, a rendezvous), so what we hold is news to it
+        as it grows, not only once it rests."""
+        with self._lock:
+            adverts = [(p, self._peers[p]) for p in present if p in self._peers]
+        return any(set(mine) - {p, *a.reach} for p, a in adverts)
+
     def lacking(self, mine: Mapping[str, int], present: Iterable[str]) -> dict[str, dict[str, int]]:
         """Per peer that does not hold what we hold, or holds more: ``they_lack`` and
         ``we_lack``, submaps summed over robots (-1 each while a present peer has not told

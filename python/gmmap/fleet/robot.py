@@ -193,7 +193,8 @@ class RobotNode:
             lacking = self.holdings.lacking(mine, present)
             if mine != seen:
                 seen, changed = mine, now
-            quiet = now >= changed + holdings.SETTLE_S  # one advert once submaps stop arriving
+            # In a mesh, one advert once submaps stop arriving says it all; a relay tells at once.
+            quiet = now >= changed + holdings.SETTLE_S or self.holdings.relaying(mine, present)
             news = quiet and self.holdings.is_news(mine, self._told, self._told_state, present)
             if holdings.advert_due(now, news, self._told_at):
                 self._advertise(mine, holdings.LINGER)
