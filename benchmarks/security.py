@@ -114,7 +114,7 @@ def demo(secure: bool) -> dict:
         "payload_bytes_per_submap": r["bytes_per_submap"]["wire"],
         "received": r["received"],
         "groups": r["groups"],
-        "refused": sum(n for by in r["refused"].values() for c in by.values() for n in c.values()),
+        "refused": sum(n for by in r["refused"].values() for n in by.values()),
         "lost": sum(r["lost"].values()),
         "wall_s": r["wall_s"],
         "_ended": (r["received"], r["groups"], kept),

@@ -43,9 +43,13 @@ class Refusals:
         with self._lock:
             return {r: dict(c) for r, c in sorted(self._counts.items())}
 
-    def total(self) -> int:
-        with self._lock:
-            return sum(n for c in self._counts.values() for n in c.values())
+    def by_cause(self) -> dict[str, int]:
+        """The counts per cause, all senders together."""
+        out: dict[str, int] = {}
+        for per in self.snapshot().values():
+            for cause, n in per.items():
+                out[cause] = out.get(cause, 0) + n
+        return dict(sorted(out.items()))
 
 
 class Guard:

@@ -99,7 +99,8 @@ def node_report(node: RobotNode) -> dict:
         **{f"submaps_{k}": node.counts[k] for k in ("built", "sent", "received", "fetched")},
         "decode_errors": node.counts["decode_errors"],
         "secure": node.door.secure,
-        "refused": node.door.refusals.snapshot(),  # by sending robot and cause
+        "refused": node.door.refusals.by_cause(),
+        "refused_by_sender": node.door.refusals.snapshot(),
         "reloaded": node.reloaded,
         "held": {r: sum(1 for x, _ in held if x == r) for r in robots},
         "bytes": {
