@@ -13,6 +13,7 @@ from gmmap.config import Config
 from gmmap.fleet.access import issue_fleet
 from gmmap.fleet.codec import encode
 from gmmap.fleet.credentials import add_member, load, revoke
+from gmmap.fleet.door import CRL_EVERY_S
 from gmmap.fleet.keys import data_key
 from gmmap.fleet.robot import RobotNode
 from gmmap.fleet.seal import seal
@@ -190,10 +191,13 @@ def test_a_replayed_submap_is_ignored_and_a_revoked_robots_are_refused(tmp_path,
     assert wait(lambda: a.store.seqs("b") == [0]) and a.drain(5)
     assert a.counts["received"] == 1
     assert a.door.refusals.snapshot() == {"b": {"bad_signature": 1}}
-    a.stop()
-    revoke(tmp_path / "fleet", "b")
-    a = node(tmp_path, "a", fleet["a"])  # restarted on the new revocation list
+    revoke(tmp_path / "fleet", "b")  # refreshes the revocation list in a's folder too
     later = seal(sign, "f", "b", "submap", 1, submap_bytes(frames, "b", 1))
+    time.sleep(CRL_EVERY_S + 0.2)  # a running robot looks at its folder's list that often
+    a._receive("b", "submap", 1, later)
+    assert a.door.refusals.by_cause() == {"bad_signature": 1, "revoked": 1}
+    a.stop()
+    a = node(tmp_path, "a", fleet["a"])  # restarted: revoked from the start
     a._receive("b", "submap", 1, later)
     assert a.door.refusals.snapshot() == {"b": {"revoked": 1}}
     assert a.store.seqs("b") == [0]  # what it held stays
@@ -219,7 +223,8 @@ def test_ten_thousand_junk_messages_leave_the_robot_mapping(tmp_path, fleet, fra
         name = "b" if secured else f"x{i % 3000}"
         junk = (b"\x01" if i % 2 else b"GMMW") + bytes(range(256)) * (1 + i % 4)
         s.put(data_key("f", name, "submap", i), junk, congestion_control=BLOCK)
-    s.put(data_key("f", "b", "submap", 10_001), b"z" * (SecurityOptions().max_bytes + 1))
+    too_big = b"z" * (SecurityOptions().max_bytes + 1)
+    s.put(data_key("f", "b", "submap", 10_001), too_big, congestion_control=BLOCK)
     mapping.join()
 
     def turned_away() -> int:  # refused at the door, or bytes that are no submap

@@ -41,6 +41,7 @@ import json
 import logging
 import threading
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 
 from cryptography import x509
@@ -78,6 +79,7 @@ from gmmap.fleet.pki import (
     TLS_KEY_FILE,
     Member,
     attribute,
+    check_authority,
     check_name,
     load_cert,
     load_crl,
@@ -136,6 +138,16 @@ class Roster:
             if name not in self._members:
                 self._revoked.add(name)
 
+    def revoke(self, crl: x509.CertificateRevocationList) -> list[str]:
+        """Forgets the members ``crl`` revokes (a CRL checked by the caller); their names."""
+        with self._lock:
+            revoked = crl.get_revoked_certificate_by_serial_number
+            gone = [n for n, m in self._members.items() if revoked(m.serial) is not None]
+            for name in gone:
+                del self._members[name]
+                self._revoked.add(name)
+        return gone
+
     def get(self, name: str) -> Member | None:
         with self._lock:
             return self._members.get(name)
@@ -192,6 +204,15 @@ class Credentials:
     def member_key(self, name: str) -> Ed25519PublicKey | None:
         """A member's signing key by name (`gmmap.fleet.seal.KeyLookup`)."""
         return self.roster.key(name)
+
+    def reread_crl(self) -> list[str]:
+        """Takes in ``crl.pem`` as it is now (``gmmap fleet revoke`` refreshes every member
+        folder's copy), if the fleet's authority signed it: the names it newly revokes. A
+        running robot refuses their submaps from then on; its links and access control keep
+        them until it restarts (Zenoh fixes those when the session opens)."""
+        crl = load_crl(self.crl_path)
+        check_authority(self.ca, crl, self.fleet, datetime.now(timezone.utc))
+        return self.roster.revoke(crl)
 
 
 def _member_json(folder: Path) -> dict[str, str]:

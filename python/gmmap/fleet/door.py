@@ -11,13 +11,17 @@ credentials (a trusted lab, tests) nothing is sealed and only the guard applies.
 from __future__ import annotations
 
 import logging
+import threading
+import time
 
-from gmmap.errors import RefusedError
+from gmmap.errors import GmmapError, RefusedError
 from gmmap.fleet.guard import Guard, Refusals
 from gmmap.fleet.seal import OVERHEAD, open_sealed, seal
 from gmmap.fleet_options import SecurityOptions
 
 log = logging.getLogger(__name__)
+
+CRL_EVERY_S = 2.0  # how often the door looks whether crl.pem changed
 
 
 class Door:
@@ -28,6 +32,8 @@ class Door:
         self.credentials = credentials
         self.refusals = Refusals()
         self.guard = Guard(options, self.refusals)
+        self._lock = threading.Lock()
+        self._crl_at, self._crl_seen = time.monotonic(), self._crl_mtime()
 
     @property
     def secure(self) -> bool:
@@ -45,6 +51,7 @@ class Door:
             return False
         if self.credentials is None:
             return True
+        self._take_revocations()
         try:
             open_sealed(self.credentials.member_key, self.fleet, robot, kind, seq, wire)
         except RefusedError as err:
@@ -56,3 +63,30 @@ class Door:
     def inner(self, wire: bytes) -> bytes:
         """The payload of a message admitted (or our own): the seal stripped."""
         return wire if self.credentials is None else wire[OVERHEAD:]
+
+    def _crl_mtime(self) -> int | None:
+        if self.credentials is None:
+            return None
+        try:
+            return self.credentials.crl_path.stat().st_mtime_ns
+        except OSError:
+            return None
+
+    def _take_revocations(self) -> None:
+        """A revocation list changed on disk (``gmmap fleet revoke``) is taken in while the
+        robot runs: the revoked robots' submaps are refused from then on."""
+        with self._lock:
+            now = time.monotonic()
+            if now < self._crl_at + CRL_EVERY_S:
+                return
+            self._crl_at, seen = now, self._crl_mtime()
+            if seen == self._crl_seen:
+                return
+            self._crl_seen = seen
+        try:
+            gone = self.credentials.reread_crl()
+        except GmmapError as err:
+            log.warning("%s: the changed revocation list is not taken: %s", self.fleet, err)
+            return
+        if gone:
+            log.warning("%s: revoked from the fleet now: %s", self.fleet, ", ".join(gone))

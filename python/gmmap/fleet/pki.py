@@ -155,7 +155,7 @@ class Member:
         return True
 
 
-def _check_authority(
+def check_authority(
     ca: x509.Certificate, crl: x509.CertificateRevocationList, fleet: str, now: datetime
 ) -> None:
     if attribute(ca.subject, NameOID.COMMON_NAME) != fleet:
@@ -223,7 +223,7 @@ def verify_member(
     `RevokedMemberError`) otherwise."""
     now = now or utcnow()
     cert = _peer_cert(cert_pem)
-    _check_authority(ca, crl, fleet, now)
+    check_authority(ca, crl, fleet, now)
     who = attribute(cert.subject, NameOID.COMMON_NAME) or cert.subject.rfc4514_string()
     try:
         cert.verify_directly_issued_by(ca)
