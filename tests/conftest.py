@@ -1,4 +1,5 @@
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -38,3 +39,13 @@ def known_mixture_samples(n: int, seed: int = 0):
     z = rng.standard_normal((n, 3))
     pts = means[comp] + np.einsum("nij,nj->ni", np.linalg.cholesky(covs)[comp], z)
     return pts, weights, means, covs
+
+
+def wait(cond, timeout: float = 15.0) -> bool:
+    """Whether ``cond()`` came true within ``timeout`` seconds (polled every 50 ms)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return bool(cond())

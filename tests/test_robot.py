@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from conftest import wait
 from gmmap.config import Config, load_config
 from gmmap.eval.registration import pose_errors
 from gmmap.fleet.robot import RobotNode
@@ -108,15 +109,6 @@ def node(tmp_path, name, port, peers=(), fleet="f"):
     )
     _OPEN.append(RobotNode(config))
     return _OPEN[-1]
-
-
-def wait(cond, timeout=15.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, frames):

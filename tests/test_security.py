@@ -9,6 +9,7 @@ from dataclasses import replace
 import pytest
 import zenoh
 
+from conftest import wait
 from gmmap.config import Config
 from gmmap.fleet.access import issue_fleet
 from gmmap.fleet.codec import encode
@@ -93,15 +94,6 @@ def submap_bytes(frames, robot: str, seq: int) -> bytes:
     builder.seq = seq
     s = builder.add(frames[0]) or builder.add(frames[1])
     return encode(s)
-
-
-def wait(cond, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def test_secured_robots_share_signed_submaps_and_strangers_get_nothing(tmp_path, fleet, frames):

@@ -16,9 +16,9 @@ _OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
 MODES = ("peer", "client")
 
 
-def check_name(what: str, name: object) -> str:
+def check_name(what: str, name: object, error: type[Exception] = TransportConfigError) -> str:
     if not isinstance(name, str) or not NAME_RE.fullmatch(name):
-        raise TransportConfigError(
+        raise error(
             f"{what} must be 1-64 characters from [A-Za-z0-9_.-] starting with a letter or digit "
             f"(no '/', '*', '?', '#', '@', '$' or spaces); got {name!r}"
         )

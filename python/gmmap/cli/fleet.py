@@ -62,9 +62,10 @@ def init(dir: Path, fleet: str) -> None:
 def add(dir: Path, name: str, role: str, force: bool) -> None:
     """Issue member ROBOT's key and certificate into DIR/ROBOT.
 
-    Copy DIR/ROBOT to the robot and run it with that folder. The earlier members' peers/
-    get ROBOT's certificate: copy their folders again, or let them learn it in-band. A name
-    that is in use is refused; a revoked one needs --force.
+    Copy DIR/ROBOT to the robot and run it with that folder (gmmap robot --credentials).
+    The earlier members' peers/ get ROBOT's certificate: copy their folders again and
+    restart those robots to let ROBOT in. A name in use is refused; a revoked one needs
+    --force.
     """
     from gmmap.fleet.credentials import add_member
 
@@ -79,7 +80,8 @@ def revoke(dir: Path, name: str) -> None:
     """Revoke member ROBOT: its certificate joins the fleet's CRL.
 
     The CRL is re-signed and every member folder's crl.pem refreshed: copy them to the
-    robots, which refuse ROBOT once they load the new CRL.
+    robots. A running robot takes its folder's new crl.pem in within seconds and refuses
+    ROBOT's submaps from then on.
     """
     from gmmap.fleet.credentials import revoke as revoke_member
 

@@ -17,6 +17,7 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 from cryptography.x509.oid import NameOID
 
+from gmmap import names
 from gmmap.errors import (
     CredentialsError,
     CredentialsFileError,
@@ -121,12 +122,7 @@ def spki(public_key: Any) -> bytes:
 
 
 def check_name(what: str, name: object) -> str:
-    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
-        raise CredentialsError(
-            f"{what} must be 1-64 characters from [A-Za-z0-9_.-] starting with a letter or digit; "
-            f"got {name!r}"
-        )
-    return name
+    return names.check_name(what, name, CredentialsError)
 
 
 def attribute(name: x509.Name, oid: x509.ObjectIdentifier) -> str | None:
