@@ -54,6 +54,7 @@ from gmmap.fleet.reload import reload
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import Transport, TransportConfig
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.live import LiveInput
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.submap import Submap, SubmapBuilder
 
@@ -118,7 +119,7 @@ class RobotNode:
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
         self._told_state = self._state = holdings.MAPPING
-        self._closed = False
+        self._closed, self._live = False, None
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
         c = config.security.credentials
@@ -160,7 +161,11 @@ class RobotNode:
         self._threads.append(th)
         return th
 
-    def start_frames(self, frames: Sequence[Frame]) -> threading.Thread:
+    def start_frames(self, frames: Sequence[Frame] | LiveInput) -> threading.Thread:
+        """Map ``frames``: a recording, resumed after the frames already turned into submaps,
+        or a `LiveInput` a driver pushes into (`gmmap.mapping.live`), until it is closed."""
+        if isinstance(frames, LiveInput):
+            self._live = frames
         return self._spawn("build", self._construction, frames)
 
     def run(self, frames: Sequence[Frame]) -> dict:
@@ -177,6 +182,8 @@ class RobotNode:
     def request_stop(self) -> None:
         """Ask the stages to stop taking work (safe from a signal handler); `stop` closes."""
         self._stopping.set()
+        if self._live is not None:
+            self._live.close()
 
     def linger(self, seconds: float, progress: Callable | None = None) -> bool:
         """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
@@ -260,7 +267,7 @@ class RobotNode:
         if self._closed:
             return
         self._closed = True
-        self._stopping.set()
+        self.request_stop()
         self._changed.set()
         self.inbox.put(None)
         self.fetch_queue.put(None)
@@ -281,8 +288,11 @@ class RobotNode:
             last = self.store.latest_seq(self.robot)
             builder.seq = 0 if last is None else last + 1
             i = self.frames_consumed
-            while i < len(frames) and not self.stopping:
-                s = builder.add(frames[i])
+            live = isinstance(frames, LiveInput)
+            for frame in iter(frames) if live else (frames[j] for j in range(i, len(frames))):
+                if self.stopping:
+                    break
+                s = builder.add(frame)
                 i += 1
                 if s is not None:
                     self._emit(s, i)
