@@ -25,7 +25,7 @@ def test_the_cli_dump_is_the_defaults(tmp_path):
     tree = yaml.safe_load(result.stdout)
     assert list(tree) == [
         "build", "select", "register", "place", "backend", "transport", "link", "robot",
-        "security", "planner", "sim",
+        "security", "ros", "planner", "sim",
     ]  # fmt: skip
     assert Config.from_dict(tree) == Config()
 

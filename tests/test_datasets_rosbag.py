@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Writer1
@@ -233,3 +235,24 @@ def test_missing_and_corrupt_bags(tmp_path):
     (tmp_path / "junk.bag").write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 50)
     with pytest.raises(FileFormatError, match=r"junk\.bag: unreadable bag"):
         RosBag(tmp_path / "junk.bag")
+
+
+def test_the_cli_takes_a_bags_topics_and_frames_from_flags_or_the_config(tmp_path):
+    from click.testing import CliRunner
+
+    from gmmap.cli import main
+
+    bag = write_bag(tmp_path / "drive.bag", ros1=True)
+    run = CliRunner().invoke
+    r = run(main, ["info", str(bag), "--tf-parent", "odom", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["frames"] == 4
+    r = run(main, ["info", str(bag), "--tf-parent", "map"])
+    assert r.exit_code != 0 and "no tf chain from 'map'" in r.output
+    config = tmp_path / "ros.yaml"
+    config.write_text("ros:\n  tf_parent: map\n")
+    for args in (["info", str(bag)], ["build", str(bag), "--out", str(tmp_path / "s")]):
+        r = run(main, [*args, "--config", str(config)])
+        assert r.exit_code != 0 and "no tf chain from 'map'" in r.output, args
+    r = run(main, ["build", str(bag), "--out", str(tmp_path / "s"), "--cloud-topic", "/x"])
+    assert r.exit_code != 0 and "/points" in r.output  # the topics the bag has

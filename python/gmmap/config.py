@@ -29,6 +29,7 @@ from gmmap.options import (
     PlannerOptions,
     RegisterOptions,
     RobotOptions,
+    RosOptions,
     SecurityOptions,
     SelectOptions,
     SimOptions,
@@ -53,6 +54,7 @@ class Config:
     link: LinkOptions = field(default_factory=LinkOptions)
     robot: RobotOptions = field(default_factory=RobotOptions)
     security: SecurityOptions = field(default_factory=SecurityOptions)
+    ros: RosOptions = field(default_factory=RosOptions)
     planner: PlannerOptions = field(default_factory=PlannerOptions)
     sim: SimOptions = field(default_factory=SimOptions)
 

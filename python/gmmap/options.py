@@ -12,6 +12,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
+
 from gmmap.errors import InvalidInputError
 from gmmap.fleet_options import LinkOptions, RobotOptions, SecurityOptions, TransportOptions
 
@@ -23,6 +25,7 @@ __all__ = [
     "PlannerOptions",
     "RegisterOptions",
     "RobotOptions",
+    "RosOptions",
     "SecurityOptions",
     "SelectOptions",
     "SimOptions",
@@ -362,3 +365,39 @@ class SimOptions:
             raise InvalidInputError("sim.robots >= 1, sim.width >= 8, sim.beams >= 1")
         if not (self.lidar_range > 0 and self.rate > 0 and self.speed > 0 and self.drift >= 0):
             raise InvalidInputError("sim.lidar_range, rate, speed > 0 and drift >= 0")
+
+
+@dataclass(frozen=True)
+class RosOptions:
+    """Which ROS topics and frames a robot maps, in a recorded bag (`gmmap.io.datasets.RosBag`)
+    and live. ``cloud_topic``: the sensor_msgs/PointCloud2 topic (None: a bag's only one).
+    Poses from ``odom_topic`` (nav_msgs/Odometry, geometry_msgs/PoseStamped or
+    PoseWithCovarianceStamped; None: a bag's only one), or, with ``tf_parent``, from /tf and
+    /tf_static: the chain from ``tf_parent`` (the odom or map frame) down to ``tf_child`` (None:
+    the clouds' frame). ``extrinsic``: the sensor in that frame (4×4 rows; None: identity)."""
+
+    cloud_topic: str | None = None
+    odom_topic: str | None = None
+    tf_parent: str | None = None
+    tf_child: str | None = None
+    extrinsic: tuple[tuple[float, ...], ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.extrinsic is not None:
+            from gmmap.math.geometry import rigid_matrix
+
+            rigid_matrix(np.asarray(self.extrinsic, dtype=float), "ros.extrinsic")
+        if self.tf_child is not None and self.tf_parent is None:
+            raise InvalidInputError("ros.tf_child needs ros.tf_parent (poses from /tf)")
+
+    def bag_options(self) -> dict[str, Any]:
+        """The `RosBag` options these settings give (those set)."""
+        extrinsic = None if self.extrinsic is None else np.asarray(self.extrinsic, dtype=float)
+        given = {
+            "topic": self.cloud_topic,
+            "odom_topic": self.odom_topic,
+            "tf_parent": self.tf_parent,
+            "tf_child": self.tf_child,
+            "extrinsic": extrinsic,
+        }
+        return {k: v for k, v in given.items() if v is not None}

@@ -15,6 +15,7 @@ from gmmap.cli.common import (
     config_option,
     frame_options,
     open_data,
+    ros_settings,
     setting,
 )
 from gmmap.config import Config
@@ -40,6 +41,7 @@ from gmmap.config import Config
 @setting("--kl-threshold", "select.kl_threshold", "Merge pairs under this KL.", type=float)
 @setting("--holdout", "build.holdout", "Points withheld to score the submaps.", type=float)
 @click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
+@ros_settings
 @frame_options
 @config_option
 @as_json_option
@@ -49,7 +51,7 @@ def command(
     """Build GMM submaps from a dataset (frames → point buffer → EM → model selection)."""
     from gmmap.mapping.submap import build_submaps, write_submaps
 
-    frames = pick(open_data(path, stride))
+    frames = pick(open_data(path, stride, config.ros))
     with click.progressbar(
         iter(frames), length=len(frames), file=sys.stderr, label=f"building submaps of {path}"
     ) as bar:

@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from gmmap.config import Config, load_config
-from gmmap.options import SENSORS, drift_overrides
+from gmmap.options import SENSORS, RosOptions, drift_overrides
 
 SEP = "__"  # a flag's parameter name is its config key with '.' → '__'
 
@@ -111,10 +111,28 @@ def _slice(text: str) -> slice:
     return slice(*parts)
 
 
-def open_data(path: Path, stride: int | None = None, **options: Any):
+def open_data(path: Path, stride: int | None = None, ros: RosOptions | None = None, **options):
+    """The dataset at ``path``; a ROS bag with the topics and frames of ``ros`` (the config's
+    ``ros`` section, `gmmap.options.RosOptions`)."""
     from gmmap.io import datasets
 
+    if ros is not None and datasets.detect_format(path) == "rosbag":
+        options = {**ros.bag_options(), **options}
     return datasets.open(path, **({"stride": stride} if stride else {}), **options)
+
+
+ROS_SETTINGS = (
+    setting("--cloud-topic", "ros.cloud_topic", "ROS bag: the PointCloud2 topic."),
+    setting("--odom-topic", "ros.odom_topic", "ROS bag: the odometry or pose topic."),
+    setting("--tf-parent", "ros.tf_parent", "ROS bag: poses from /tf, from this frame down."),
+    setting("--tf-child", "ros.tf_child", "ROS bag: ...to this frame (default the clouds')."),
+)
+
+
+def ros_settings(fn: Callable) -> Callable:
+    for option in reversed(ROS_SETTINGS):
+        fn = option(fn)
+    return fn
 
 
 SIM_SETTINGS = (

@@ -19,7 +19,8 @@ from gmmap.config import load_config
 )
 def command(dump: bool, config_path: Path | None) -> None:
     """The configuration every command reads: sections build, select, register, place,
-    backend, transport, robot, planner, sim. Without --config: the defaults.
+    backend, transport, link, robot, security, ros, planner, sim. Without --config: the
+    defaults.
 
     Save the dump, edit what you need (or keep only those keys) and give it to any command
     with --config FILE; its flags override single keys, and every output folder gets the

@@ -7,6 +7,9 @@ from pathlib import Path
 
 import click
 
+from gmmap.cli.common import config_option, ros_settings
+from gmmap.config import Config
+
 
 @click.command("info")
 @click.argument("path", type=click.Path(exists=True, path_type=Path))
@@ -17,35 +20,37 @@ import click
     help="Skip format detection.",
 )
 @click.option("--stride", type=int, help="TUM: pixel stride of the back-projection.")
-@click.option("--topic", help="ROS bag: the PointCloud2 topic.")
-@click.option("--odom-topic", help="ROS bag: the odometry / pose topic.")
+@ros_settings
 @click.option("--voxel", type=float, help="KITTI, point files, ROS bag: voxel size (m).")
 @click.option(
     "--sample", default=50, show_default=True, help="Frames read to count points per frame."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@config_option
 def command(
     path: Path,
     fmt: str | None,
     stride: int | None,
-    topic: str | None,
-    odom_topic: str | None,
     voxel: float | None,
     sample: int,
     as_json: bool,
+    config: Config,
 ) -> None:
     """Summarise a dataset: format, frames, duration, path length, points per frame.
 
     PATH is detected as one of: a TUM RGB-D folder (depth.txt; also keyframe exports with
     truth_cam_poses.txt, and `gmmap sim` depth runs), a KITTI odometry sequence, a folder of
     PLY/PCD files with a TUM-format poses file (also `gmmap sim --sensor lidar` runs), or a
-    ROS 1/2 bag. The path length follows the poses the loader yields (the odometry where there
-    is one); the ground truth's is given too when the data has one.
+    ROS 1/2 bag (its topics and frames: the flags, or the config's ros section). The path
+    length follows the poses the loader yields (the odometry where there is one); the ground
+    truth's is given too when the data has one.
     """
     from gmmap.io import datasets
 
-    given = dict(stride=stride, topic=topic, odom_topic=odom_topic, voxel=voxel)
+    given = dict(stride=stride, voxel=voxel)
     options = {k: v for k, v in given.items() if v is not None}
+    if (fmt or datasets.detect_format(path)) == "rosbag":
+        options.update(config.ros.bag_options())
     seq = datasets.open(path, format=fmt, **options)
     r = {"path": str(path), **datasets.describe(seq, max_frames=max(1, sample))}
     if as_json:

@@ -19,6 +19,7 @@ from gmmap.cli.common import (
     log,
     odometry_drift_option,
     open_data,
+    ros_settings,
     save_trajectories,
     setting,
     sim_settings,
@@ -34,6 +35,7 @@ from gmmap.config import Config
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
 @sim_settings
 @click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
+@ros_settings
 @frame_options
 @setting("--listen", "transport.listen", "Zenoh listen endpoint (default loopback).",
          multiple=True)  # fmt: skip
@@ -136,7 +138,7 @@ def _frames(data: Path | None, simulated: bool, index: int, stride: int | None, 
     if (data is None) == (not simulated):
         raise click.UsageError("give exactly one of --data and --sim")
     if data is not None:
-        return open_data(data, stride)
+        return open_data(data, stride, config.ros)
     from gmmap.io.sim import Paced, simulate_options
 
     sim = config.sim
