@@ -16,7 +16,7 @@ import time
 
 from gmmap.errors import GmmapError, RefusedError
 from gmmap.fleet.guard import Guard, Refusals
-from gmmap.fleet.seal import OVERHEAD, open_sealed, seal
+from gmmap.fleet.seal import OVERHEAD, VERSION, open_sealed, seal
 from gmmap.fleet_options import SecurityOptions
 
 log = logging.getLogger(__name__)
@@ -61,8 +61,11 @@ class Door:
         return True
 
     def inner(self, wire: bytes) -> bytes:
-        """The payload of a message admitted (or our own): the seal stripped."""
-        return wire if self.credentials is None else wire[OVERHEAD:]
+        """The payload of a message admitted (or our own): the seal stripped. A store written
+        before the fleet was secured holds unsealed payloads: those stay as they are (and
+        peers refuse them, unsigned)."""
+        sealed = self.credentials is not None and wire[:1] == bytes([VERSION])
+        return wire[OVERHEAD:] if sealed else wire
 
     def _crl_mtime(self) -> int | None:
         if self.credentials is None:
