@@ -71,3 +71,8 @@ class UntrustedMemberError(CredentialsError):
 
 class RevokedMemberError(UntrustedMemberError):
     """A member certificate that the fleet's revocation list (CRL) names."""
+
+
+class RosMessageError(InvalidInputError):
+    """A ROS 2 message, key expression or rmw_zenoh attachment that `gmmap.io.ros2` cannot use:
+    truncated or garbage CDR, a wrong type, an unsupported encoding or distro, a malformed key."""

@@ -60,6 +60,13 @@ def decode_pointcloud2(msg: object) -> np.ndarray:
         formats = [order + FIELD_TYPES[fields[a].datatype] for a in "xyz"]
     except KeyError as exc:
         raise FileFormatError(f"PointCloud2 field of unknown datatype {exc}") from exc
+    for a, fmt in zip("xyz", formats, strict=True):
+        # Checked here, as numpy would only say "cannot override to smaller itemsize".
+        if fields[a].offset + np.dtype(fmt).itemsize > msg.point_step:
+            raise FileFormatError(
+                f"PointCloud2 field {a} at offset {fields[a].offset} does not fit in "
+                f"point_step={msg.point_step}"
+            )
     dtype = np.dtype(
         {
             "names": list("xyz"),
