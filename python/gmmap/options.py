@@ -384,9 +384,11 @@ class RosOptions:
 
     def __post_init__(self) -> None:
         if self.extrinsic is not None:
-            from gmmap.math.geometry import rigid_matrix
-
-            rigid_matrix(np.asarray(self.extrinsic, dtype=float), "ros.extrinsic")
+            T = np.asarray(self.extrinsic, dtype=float)
+            R = T[:3, :3] if T.shape == (4, 4) else np.zeros((3, 3))
+            rigid = np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
+            if not (rigid and np.isfinite(T).all() and np.allclose(T[3], [0, 0, 0, 1])):
+                raise InvalidInputError(f"ros.extrinsic must be a rigid 4x4 transform: {T}")
         if self.tf_child is not None and self.tf_parent is None:
             raise InvalidInputError("ros.tf_child needs ros.tf_parent (poses from /tf)")
 
