@@ -36,6 +36,8 @@ __all__ = [
 STRATEGIES = ("points", "gmm-merge", "per-frame")
 COVARIANCES = ("diag", "full")
 SENSORS = ("lidar", "depth")
+KEY_FORMATS = ("rmw_zenoh", "bridge")
+DISTROS = ("humble", "jazzy", "kilted")
 
 
 @dataclass(frozen=True)
@@ -374,13 +376,31 @@ class RosOptions:
     Poses from ``odom_topic`` (nav_msgs/Odometry, geometry_msgs/PoseStamped or
     PoseWithCovarianceStamped; None: a bag's only one), or, with ``tf_parent``, from /tf and
     /tf_static: the chain from ``tf_parent`` (the odom or map frame) down to ``tf_child`` (None:
-    the clouds' frame). ``extrinsic``: the sensor in that frame (4×4 rows; None: identity)."""
+    the clouds' frame). ``extrinsic``: the sensor in that frame (4×4 rows; None: identity).
+
+    Live over ROS 2 (``gmmap robot --ros2``, `gmmap.fleet.ros2bridge`): the topics in
+    ``key_format`` ``rmw_zenoh`` (ROS ``domain_id``, type hashes of ``distro``) or ``bridge``
+    (zenoh-bridge-ros2dds: the topic name as the key), on a Zenoh session connecting to
+    ``connect`` (rmw_zenoh's router listens on tcp/127.0.0.1:7447); live, ``cloud_topic`` and
+    ``odom_topic`` default to /points and /odom, and /tf gives poses only where it carries
+    ``tf_parent`` → ``tf_child`` as one transform. Out, every ``publish_every_s``: the merged
+    map on ``map_topic`` (MarkerArray of ellipsoids) and ``points_topic`` (PointCloud2 sampled
+    from it), the frames between the robots' maps on /tf (a spanning tree:
+    ``<reference>/map`` → ``<robot>/map``), and a JSON status on ``status_topic``."""
 
     cloud_topic: str | None = None
     odom_topic: str | None = None
     tf_parent: str | None = None
     tf_child: str | None = None
     extrinsic: tuple[tuple[float, ...], ...] | None = None
+    key_format: str = "rmw_zenoh"
+    distro: str = "jazzy"
+    domain_id: int = 0
+    connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    map_topic: str = "/gmmap/map"
+    points_topic: str = "/gmmap/map_points"
+    status_topic: str = "/gmmap/status"
+    publish_every_s: float = 2.0
 
     def __post_init__(self) -> None:
         if self.extrinsic is not None:
@@ -391,6 +411,10 @@ class RosOptions:
                 raise InvalidInputError(f"ros.extrinsic must be a rigid 4x4 transform: {T}")
         if self.tf_child is not None and self.tf_parent is None:
             raise InvalidInputError("ros.tf_child needs ros.tf_parent (poses from /tf)")
+        if self.key_format not in KEY_FORMATS or self.distro not in DISTROS:
+            raise InvalidInputError(f"ros.key_format in {KEY_FORMATS}, ros.distro in {DISTROS}")
+        if not (0 <= self.domain_id <= 232 and self.publish_every_s > 0):
+            raise InvalidInputError("ros.domain_id must be in 0..232, publish_every_s > 0")
 
     def bag_options(self) -> dict[str, Any]:
         """The `RosBag` options these settings give (those set)."""

@@ -33,6 +33,7 @@ from gmmap.config import Config
 @click.option("--data", type=click.Path(exists=True, path_type=Path), help="A dataset to map.")
 @click.option("--sim", "simulated", is_flag=True, help="Map a simulated robot (sim section).")
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
+@click.option("--ros2", is_flag=True, help="Map live ROS 2 topics over Zenoh (the ros section).")
 @sim_settings
 @click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
 @ros_settings
@@ -77,6 +78,7 @@ from gmmap.config import Config
 def command(
     data: Path | None,
     simulated: bool,
+    ros2: bool,
     sim_index: int,
     stride: int | None,
     pick,
@@ -95,7 +97,18 @@ def command(
 
     if config.security.credentials is None:
         log(f"{config.robot.name}: plain TCP, submaps unsigned (no --credentials: a trusted lab)")
-    frames = pick(_frames(data, simulated, sim_index, stride, config))
+    if sum((data is not None, simulated, ros2)) != 1:
+        raise click.UsageError("give exactly one of --data, --sim and --ros2")
+    bridge = None
+    if ros2:
+        from gmmap.fleet.ros2bridge import Ros2Bridge
+
+        o = config.ros
+        bridge = Ros2Bridge(config.robot.name, o)
+        frames = bridge.live
+        log(f"{config.robot.name}: ROS 2 over Zenoh ({o.key_format}, {o.distro}), {o.connect}")
+    else:
+        frames = pick(_frames(data, simulated, sim_index, stride, config))
     truth: dict[str, list] = {}
 
     def on_built(built: Built) -> None:
@@ -121,7 +134,12 @@ def command(
             saved.update(save_map(gmap, map_png))
         return saved
 
-    r = run_robot(config, frames, report_path, on_finish, on_built, log)
+    try:
+        attach = None if bridge is None else bridge.attach
+        r = run_robot(config, frames, report_path, on_finish, on_built, log, attach)
+    finally:
+        if bridge is not None:
+            bridge.close()
     if report_path is not None:  # the effective configuration beside the report
         config.save(report_path.with_suffix(".config.yaml"))
     if truth_path is not None:
@@ -135,8 +153,6 @@ def command(
 
 
 def _frames(data: Path | None, simulated: bool, index: int, stride: int | None, config: Config):
-    if (data is None) == (not simulated):
-        raise click.UsageError("give exactly one of --data and --sim")
     if data is not None:
         return open_data(data, stride, config.ros)
     from gmmap.io.sim import Paced, simulate_options

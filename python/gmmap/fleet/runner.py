@@ -14,6 +14,7 @@ import numpy as np
 from gmmap.config import Config
 from gmmap.fleet.robot import BuiltCallback, RobotNode
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.live import LiveInput
 
 if TYPE_CHECKING:
     from gmmap.mapping.backend import BackendResult
@@ -27,16 +28,18 @@ except ImportError:  # Windows: no getrusage
 
 def run_robot(
     config: Config,
-    frames: Sequence[Frame],
+    frames: Sequence[Frame] | LiveInput,
     report_path: Path | None = None,
     on_finish: Callable[[Mapper], dict] | None = None,
     on_built: BuiltCallback | None = None,
     progress: Callable[[str], None] | None = None,
+    on_start: Callable[[RobotNode], object] | None = None,
 ) -> dict:
     """Run a node over ``frames``, linger, report, shut down. SIGINT/SIGTERM stop it cleanly
     (the report is still written, with what was done). ``on_finish`` receives the node's
     mapper at the end, unless interrupted (to save its map, trajectories, …), and returns what
-    to add to the report."""
+    to add to the report. ``on_start`` receives the node once it started (a ROS bridge that
+    publishes its outputs, say)."""
     import signal
 
     say = progress or (lambda _m: None)
@@ -55,14 +58,15 @@ def run_robot(
             old[sig] = signal.signal(sig, on_signal)
     try:
         node.start()
+        if on_start is not None:
+            on_start(node)
         if config.robot.wait_for:
             ok = node.transport.wait_for_peers(config.robot.wait_for, config.robot.wait_timeout)
             peers = ", ".join(node.transport.peers()) or "none"
             say(f"{name}: peers {'present' if ok else 'missing'}: {peers}")
-        say(
-            f"{name}: {len(frames)} frames, resuming at {node.frames_consumed}, "
-            f"{node.reloaded} submaps reloaded"
-        )
+        count = f"{len(frames)} frames" if hasattr(frames, "__len__") else "live frames"
+        resumed = f"resuming at {node.frames_consumed}, {node.reloaded} submaps reloaded"
+        say(f"{name}: {count}, {resumed}")
         builder = node.start_frames(frames)
         while builder.is_alive() and not stopped.is_set():
             builder.join(0.1)

@@ -1,0 +1,123 @@
+"""A robot node fed by ROS 2 topics over Zenoh (`gmmap.fleet.ros2bridge`), in both key formats:
+messages serialised by rosbags in, the node's outputs decoded back by rosbags. Tested against
+the wire formats on this machine, not against a running ROS 2 graph."""
+
+import json
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import zenoh
+
+from conftest import wait
+from gmmap.config import Config
+from gmmap.fleet.robot import RobotNode
+from gmmap.fleet.ros2bridge import Ros2Bridge, _tf_tree
+from gmmap.fleet.transport import free_port
+from gmmap.io import ros2
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.math.geometry import matrix_to_quaternion
+from gmmap.options import BuildOptions, RobotOptions, RosOptions
+
+T = ros2.typestore("jazzy").types
+
+
+def odometry(stamp: float, pose: np.ndarray) -> bytes:
+    """A nav_msgs/Odometry, serialised by rosbags."""
+    sec = int(stamp)
+    header = T["std_msgs/msg/Header"](
+        T["builtin_interfaces/msg/Time"](sec, int((stamp - sec) * 1e9)), "odom"
+    )
+    q = T["geometry_msgs/msg/Quaternion"](*matrix_to_quaternion(pose[None, :3, :3])[0])
+    p = T["geometry_msgs/msg/Pose"](T["geometry_msgs/msg/Point"](*pose[:3, 3]), q)
+    vec = T["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](
+        T["geometry_msgs/msg/Twist"](vec, vec), np.zeros(36)
+    )
+    msg = T["nav_msgs/msg/Odometry"](
+        header, "base_link", T["geometry_msgs/msg/PoseWithCovariance"](p, np.zeros(36)), twist
+    )
+    return bytes(ros2.typestore("jazzy").serialize_cdr(msg, ros2.ODOMETRY))
+
+
+def key(fmt: str, topic: str, typename: str) -> str:
+    if fmt == "bridge":
+        return ros2.bridge_key(topic)
+    return ros2.rmw_zenoh_key(topic, typename)
+
+
+@pytest.mark.parametrize("fmt", ["rmw_zenoh", "bridge"])
+def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt):
+    port = free_port()
+    graph = zenoh.Config()  # the ROS 2 side: where rmw_zenoh's router would listen
+    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    graph.insert_json5("scouting/multicast/enabled", "false")
+    outputs: dict[str, bytes] = {}
+    attachments: dict[str, bytes | None] = {}
+
+    def heard(s: zenoh.Sample) -> None:
+        outputs[str(s.key_expr)] = s.payload.to_bytes()
+        attachments[str(s.key_expr)] = None if s.attachment is None else s.attachment.to_bytes()
+
+    with zenoh.open(graph) as ros:
+        ros.declare_subscriber("**", heard)
+        config = Config(
+            robot=RobotOptions(name="a", fleet="f", store=str(tmp_path / "a.db")),
+            build=BuildOptions(frames_per_submap=2, covariance="full", n_components=60),
+        )
+        options = RosOptions(key_format=fmt, connect=(f"tcp/127.0.0.1:{port}",),
+                             publish_every_s=0.3)  # fmt: skip
+        node = RobotNode(config)
+        bridge = Ros2Bridge("a", options)
+        try:
+            node.start()
+            builder = node.start_frames(bridge.live)
+            bridge.attach(node)
+            time.sleep(0.5)  # the bridge's subscriptions reach the graph's session
+            for f in TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:4]:
+                cloud = ros2.encode_pointcloud2(f.points, "camera", f.stamp)
+                ros.put(key(fmt, "/points", ros2.POINTCLOUD2), cloud)
+                ros.put(key(fmt, "/odom", ros2.ODOMETRY), odometry(f.stamp, f.pose))
+            ros.put(key(fmt, "/points", ros2.POINTCLOUD2), b"not cdr")
+            assert wait(lambda: node.store.seqs("a") == [0, 1], 30)
+            assert bridge.counts["clouds"] == 4 and bridge.counts["bad"] == 1
+            map_key = key(fmt, "/gmmap/map", ros2.MARKER_ARRAY)
+
+            def shown() -> list:  # the ellipsoids the last MarkerArray adds
+                if map_key not in outputs:
+                    return []
+                sent = ros2.typestore("jazzy").deserialize_cdr(outputs[map_key], ros2.MARKER_ARRAY)
+                return [m for m in sent.markers if m.action == 0]
+
+            assert wait(lambda: len(shown()) == len(node.global_map().gmm) > 0, 15)
+            assert {m.ns for m in shown()} == {"a"}
+            status_key = key(fmt, "/gmmap/status", ros2.STRING)
+            status = json.loads(
+                ros2.typestore("jazzy").deserialize_cdr(outputs[status_key], ros2.STRING).data
+            )
+            assert status["robot"] == "a" and status["live"]["mapped"] == 4
+            if fmt == "rmw_zenoh":  # the type hash in the key, rmw_zenoh's attachment beside
+                assert map_key.endswith(ros2.type_hash(ros2.MARKER_ARRAY, "jazzy"))
+                assert ros2.parse_attachment(attachments[status_key]).sequence_number > 0
+            else:
+                assert attachments[status_key] is None
+        finally:
+            bridge.close()
+            builder.join(timeout=10)
+            node.stop()
+
+
+def test_the_tf_tree_hangs_every_robots_map_under_its_groups_reference():
+    T_ab = np.eye(4)
+    T_ab[0, 3] = 2.0
+    frames = SimpleNamespace(
+        robots=["a", "b", "c"],
+        reference=lambda r: "a" if r in "ab" else "c",
+        to_reference=lambda r: T_ab if r == "b" else np.eye(4),
+    )
+    node = SimpleNamespace(mapper=SimpleNamespace(result=object(), frames=frames))
+    tree = _tf_tree(node, 5.0)
+    assert [(p, c) for p, c, _, _ in tree] == [("a/map", "b/map")]  # c is alone: no edge
+    decoded = ros2.decode_tf(ros2.encode_tf(tree))
+    assert decoded[0].parent == "a/map" and np.allclose(decoded[0].pose, T_ab)
