@@ -1,4 +1,4 @@
-"""A robot node fed by ROS 2 topics over Zenoh (`gmmap.fleet.ros2bridge`), in both key formats:
+"""A robot node fed by ROS 2 topics over Zenoh (`gmmap.io.ros2bridge`), in both key formats:
 messages serialised by rosbags in, the node's outputs decoded back by rosbags. Tested against
 the wire formats on this machine, not against a running ROS 2 graph."""
 
@@ -13,10 +13,10 @@ import zenoh
 from conftest import wait
 from gmmap.config import Config
 from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.ros2bridge import Ros2Bridge, _tf_tree
 from gmmap.fleet.transport import free_port
 from gmmap.io import ros2
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.io.ros2bridge import Ros2Bridge, _tf_tree
 from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.options import BuildOptions, RobotOptions, RosOptions
 

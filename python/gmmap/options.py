@@ -378,7 +378,7 @@ class RosOptions:
     /tf_static: the chain from ``tf_parent`` (the odom or map frame) down to ``tf_child`` (None:
     the clouds' frame). ``extrinsic``: the sensor in that frame (4×4 rows; None: identity).
 
-    Live over ROS 2 (``gmmap robot --ros2``, `gmmap.fleet.ros2bridge`): the topics in
+    Live over ROS 2 (``gmmap robot --ros2``, `gmmap.io.ros2bridge`): the topics in
     ``key_format`` ``rmw_zenoh`` (ROS ``domain_id``, type hashes of ``distro``) or ``bridge``
     (zenoh-bridge-ros2dds: the topic name as the key), on a Zenoh session connecting to
     ``connect`` (rmw_zenoh's router listens on tcp/127.0.0.1:7447); live, ``cloud_topic`` and

@@ -101,7 +101,7 @@ def command(
         raise click.UsageError("give exactly one of --data, --sim and --ros2")
     bridge = None
     if ros2:
-        from gmmap.fleet.ros2bridge import Ros2Bridge
+        from gmmap.io.ros2bridge import Ros2Bridge
 
         o = config.ros
         bridge = Ros2Bridge(config.robot.name, o)
