@@ -121,3 +121,40 @@ def test_the_tf_tree_hangs_every_robots_map_under_its_groups_reference():
     assert [(p, c) for p, c, _, _ in tree] == [("a/map", "b/map")]  # c is alone: no edge
     decoded = ros2.decode_tf(ros2.encode_tf(tree))
     assert decoded[0].parent == "a/map" and np.allclose(decoded[0].pose, T_ab)
+
+
+def test_depth_images_with_their_camera_info_become_frames():
+    port = free_port()
+    graph = zenoh.Config()
+    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    graph.insert_json5("scouting/multicast/enabled", "false")
+    ts = ros2.typestore("jazzy")
+    header = T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](10, 0), "camera")
+    depth = np.full((6, 8), 2000, np.uint16)  # a wall 2 m ahead, in millimetres
+    image = T["sensor_msgs/msg/Image"](header, 6, 8, "16UC1", False, 16,
+                                       np.frombuffer(depth.tobytes(), np.uint8))  # fmt: skip
+    roi = T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
+    k = np.array([4.0, 0, 4.0, 0, 4.0, 3.0, 0, 0, 1])
+    info = T["sensor_msgs/msg/CameraInfo"](header, 6, 8, "plumb_bob", np.zeros(5), k,
+                                           np.eye(3).ravel(), np.zeros(12), 0, 0, roi)  # fmt: skip
+    options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), depth_topic="/camera/depth",
+                         depth_stride=2)  # fmt: skip
+    with zenoh.open(graph) as ros:
+        bridge = Ros2Bridge("a", options)
+        try:
+            time.sleep(0.5)
+            image_key = ros2.rmw_zenoh_key("/camera/depth", ros2.IMAGE)
+            ros.put(image_key, bytes(ts.serialize_cdr(image, ros2.IMAGE)))  # no intrinsics yet
+            info_key = ros2.rmw_zenoh_key("/camera/camera_info", ros2.CAMERA_INFO)
+            ros.put(info_key, bytes(ts.serialize_cdr(info, ros2.CAMERA_INFO)))
+            time.sleep(0.2)
+            ros.put(image_key, bytes(ts.serialize_cdr(image, ros2.IMAGE)))
+            ros.put(ros2.rmw_zenoh_key("/odom", ros2.ODOMETRY), odometry(9.0, np.eye(4)))
+            ros.put(ros2.rmw_zenoh_key("/odom", ros2.ODOMETRY), odometry(11.0, np.eye(4)))
+            assert wait(lambda: bridge.live.counts.frames == 1, 5)
+            assert bridge.counts["bad"] == 1  # the image before its CameraInfo
+            bridge.live.close()
+            (frame,) = list(bridge.live)
+            assert len(frame.points) == 12 and np.allclose(frame.points[:, 2], 2.0)
+        finally:
+            bridge.close()

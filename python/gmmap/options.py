@@ -382,7 +382,10 @@ class RosOptions:
     ``key_format`` ``rmw_zenoh`` (ROS ``domain_id``, type hashes of ``distro``) or ``bridge``
     (zenoh-bridge-ros2dds: the topic name as the key), on a Zenoh session connecting to
     ``connect`` (rmw_zenoh's router listens on tcp/127.0.0.1:7447); live, ``cloud_topic`` and
-    ``odom_topic`` default to /points and /odom, and /tf gives poses only where it carries
+    ``odom_topic`` default to /points and /odom; with ``depth_topic``, depth images (16UC1 or
+    32FC1, every ``depth_stride``-th pixel) with the intrinsics of ``camera_info_topic``
+    (default: camera_info beside the depth topic) instead of clouds; /tf gives poses only where
+    it carries
     ``tf_parent`` → ``tf_child`` as one transform. Out, every ``publish_every_s``: the merged
     map on ``map_topic`` (MarkerArray of ellipsoids) and ``points_topic`` (PointCloud2 sampled
     from it), the frames between the robots' maps on /tf (a spanning tree:
@@ -393,6 +396,9 @@ class RosOptions:
     tf_parent: str | None = None
     tf_child: str | None = None
     extrinsic: tuple[tuple[float, ...], ...] | None = None
+    depth_topic: str | None = None
+    camera_info_topic: str | None = None
+    depth_stride: int = 4
     key_format: str = "rmw_zenoh"
     distro: str = "jazzy"
     domain_id: int = 0
@@ -413,6 +419,8 @@ class RosOptions:
             raise InvalidInputError("ros.tf_child needs ros.tf_parent (poses from /tf)")
         if self.key_format not in KEY_FORMATS or self.distro not in DISTROS:
             raise InvalidInputError(f"ros.key_format in {KEY_FORMATS}, ros.distro in {DISTROS}")
+        if isinstance(self.depth_stride, bool) or not 1 <= self.depth_stride <= 64:
+            raise InvalidInputError(f"ros.depth_stride must be 1..64, got {self.depth_stride}")
         if not (0 <= self.domain_id <= 232 and self.publish_every_s > 0):
             raise InvalidInputError("ros.domain_id must be in 0..232, publish_every_s > 0")
 

@@ -7,7 +7,8 @@ sequence number, timestamp and source id) and zenoh-bridge-ros2dds (the topic as
 bridge opens its own Zenoh session to ``ros.connect`` (the ROS graph's router), apart from the
 fleet's: ROS traffic never goes on the fleet's links, and the fleet's keys never reach ROS.
 
-In: sensor_msgs/PointCloud2 on ``cloud_topic`` → `LiveInput.push_frame`; nav_msgs/Odometry on
+In: sensor_msgs/PointCloud2 on ``cloud_topic``, or sensor_msgs/Image depth on ``depth_topic``
+with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on
 ``odom_topic``, or tf2_msgs/TFMessage on /tf where it carries ``tf_parent`` → ``tf_child``,
 → `LiveInput.push_pose`. A message that does not decode is counted and dropped. Subscriptions
 in rmw_zenoh's format take any type hash (a Humble publisher sends none) and check it where
@@ -63,7 +64,14 @@ class Ros2Bridge:
         except zenoh.ZError as err:
             raise TransportError(f"cannot open the ROS 2 Zenoh session: {err}") from err
         o = options
-        self._subs = [self._subscribe(o.cloud_topic or "/points", ros2.POINTCLOUD2, self._cloud)]
+        self._camera: ros2.Camera | None = None
+        if o.depth_topic is not None:
+            info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
+            self._subs = [self._subscribe(info, ros2.CAMERA_INFO, self._camera_info),
+                          self._subscribe(o.depth_topic, ros2.IMAGE, self._depth)]  # fmt: skip
+        else:
+            cloud = o.cloud_topic or "/points"
+            self._subs = [self._subscribe(cloud, ros2.POINTCLOUD2, self._cloud)]
         if o.tf_parent is not None:
             self._subs.append(self._subscribe("/tf", ros2.TF_MESSAGE, self._tf))
         else:
@@ -96,6 +104,17 @@ class Ros2Bridge:
 
     def _cloud(self, data: bytes) -> None:
         cloud = ros2.decode_pointcloud2(data, self.options.distro)
+        self.counts["clouds"] += 1
+        self.live.push_frame(cloud.stamp, cloud.points)
+
+    def _camera_info(self, data: bytes) -> None:
+        self._camera = ros2.decode_camera_info(data, self.options.distro)
+
+    def _depth(self, data: bytes) -> None:
+        if self._camera is None:  # no intrinsics yet: nothing to back-project with
+            raise InvalidInputError("a depth image before its CameraInfo")
+        o = self.options
+        cloud = ros2.decode_depth_image(data, self._camera, o.depth_stride, o.distro)
         self.counts["clouds"] += 1
         self.live.push_frame(cloud.stamp, cloud.points)
 
