@@ -93,10 +93,12 @@ def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt)
             assert wait(lambda: len(shown()) == len(node.global_map().gmm) > 0, 15)
             assert {m.ns for m in shown()} == {"a"}
             status_key = key(fmt, "/gmmap/status", ros2.STRING)
-            status = json.loads(
-                ros2.typestore("jazzy").deserialize_cdr(outputs[status_key], ros2.STRING).data
-            )
-            assert status["robot"] == "a" and status["live"]["mapped"] == 4
+
+            def status() -> dict:
+                data = ros2.typestore("jazzy").deserialize_cdr(outputs[status_key], ros2.STRING)
+                return json.loads(data.data)
+
+            assert wait(lambda: status()["live"]["mapped"] == 4, 10) and status()["robot"] == "a"
             if fmt == "rmw_zenoh":  # the type hash in the key, rmw_zenoh's attachment beside
                 assert map_key.endswith(ros2.type_hash(ros2.MARKER_ARRAY, "jazzy"))
                 assert ros2.parse_attachment(attachments[status_key]).sequence_number > 0
@@ -151,10 +153,38 @@ def test_depth_images_with_their_camera_info_become_frames():
             ros.put(image_key, bytes(ts.serialize_cdr(image, ros2.IMAGE)))
             ros.put(ros2.rmw_zenoh_key("/odom", ros2.ODOMETRY), odometry(9.0, np.eye(4)))
             ros.put(ros2.rmw_zenoh_key("/odom", ros2.ODOMETRY), odometry(11.0, np.eye(4)))
-            assert wait(lambda: bridge.live.counts.frames == 1, 5)
+            assert wait(lambda: bridge.live.counts.frames == 1 and bridge.counts["poses"] == 2, 5)
             assert bridge.counts["bad"] == 1  # the image before its CameraInfo
             bridge.live.close()
             (frame,) = list(bridge.live)
             assert len(frame.points) == 12 and np.allclose(frame.points[:, 2], 2.0)
+        finally:
+            bridge.close()
+
+
+def test_poses_from_one_tf_edge_down_to_the_clouds_frame():
+    port = free_port()
+    graph = zenoh.Config()
+    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    graph.insert_json5("scouting/multicast/enabled", "false")
+    options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), tf_parent="odom", key_format="bridge")
+    moved = np.eye(4)
+    moved[0, 3] = 1.0
+    with zenoh.open(graph) as ros:
+        bridge = Ros2Bridge("a", options)
+        try:
+            time.sleep(0.5)
+            points = np.ones((5, 3), np.float32)
+            ros.put(ros2.bridge_key("/points"), ros2.encode_pointcloud2(points, "camera", 1.5))
+            assert wait(lambda: bridge.counts["clouds"] == 1, 5)
+            other = ros2.encode_tf([("odom", "base_link", moved, 1.0)])  # not the clouds' frame
+            ros.put(ros2.bridge_key("/tf"), other)
+            for stamp, pose in ((1.0, np.eye(4)), (2.0, moved)):
+                ros.put(ros2.bridge_key("/tf"), ros2.encode_tf([("odom", "camera", pose, stamp)]))
+            assert wait(lambda: bridge.counts["poses"] == 2, 5)
+            bridge.live.close()
+            frames = list(bridge.live)
+            assert len(frames) == 1, (bridge.live.counts, bridge.live._stamps, bridge.counts)
+            assert np.isclose(frames[0].pose[0, 3], 0.5)  # halfway between the two
         finally:
             bridge.close()

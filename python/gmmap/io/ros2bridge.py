@@ -65,6 +65,7 @@ class Ros2Bridge:
             raise TransportError(f"cannot open the ROS 2 Zenoh session: {err}") from err
         o = options
         self._camera: ros2.Camera | None = None
+        self._sensor = ""  # the frames' frame_id: /tf's child where ros.tf_child is unset
         if o.depth_topic is not None:
             info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
             self._subs = [self._subscribe(info, ros2.CAMERA_INFO, self._camera_info),
@@ -103,9 +104,12 @@ class Ros2Bridge:
         return self.session.declare_subscriber(self._key(topic, typename, True), on_sample)
 
     def _cloud(self, data: bytes) -> None:
-        cloud = ros2.decode_pointcloud2(data, self.options.distro)
-        self.counts["clouds"] += 1
+        self._push(ros2.decode_pointcloud2(data, self.options.distro))
+
+    def _push(self, cloud: ros2.Cloud) -> None:
+        self._sensor = cloud.frame_id
         self.live.push_frame(cloud.stamp, cloud.points)
+        self.counts["clouds"] += 1
 
     def _camera_info(self, data: bytes) -> None:
         self._camera = ros2.decode_camera_info(data, self.options.distro)
@@ -114,23 +118,20 @@ class Ros2Bridge:
         if self._camera is None:  # no intrinsics yet: nothing to back-project with
             raise InvalidInputError("a depth image before its CameraInfo")
         o = self.options
-        cloud = ros2.decode_depth_image(data, self._camera, o.depth_stride, o.distro)
-        self.counts["clouds"] += 1
-        self.live.push_frame(cloud.stamp, cloud.points)
+        self._push(ros2.decode_depth_image(data, self._camera, o.depth_stride, o.distro))
 
     def _odom(self, data: bytes) -> None:
         p = ros2.decode_odometry(data, self.options.distro)
-        self.counts["poses"] += 1
         self.live.push_pose(p.stamp, p.pose)
+        self.counts["poses"] += 1
 
     def _tf(self, data: bytes) -> None:
-        want = (self.options.tf_parent, self.options.tf_child)
-        for p in ros2.decode_tf(data, self.options.distro):
-            if (p.parent.lstrip("/"), p.child.lstrip("/")) == tuple(
-                (w or "").lstrip("/") for w in want
-            ):
-                self.counts["poses"] += 1
+        o = self.options
+        want = tuple(w.lstrip("/") for w in (o.tf_parent or "", o.tf_child or self._sensor))
+        for p in ros2.decode_tf(data, o.distro):
+            if (p.parent.lstrip("/"), p.child.lstrip("/")) == want:
                 self.live.push_pose(p.stamp, p.pose)
+                self.counts["poses"] += 1
 
     # ---- out --------------------------------------------------------------------------------
 
