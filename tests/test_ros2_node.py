@@ -42,6 +42,14 @@ def odometry(stamp: float, pose: np.ndarray) -> bytes:
     return bytes(ros2.typestore("jazzy").serialize_cdr(msg, ros2.ODOMETRY))
 
 
+def graph(port: int) -> zenoh.Session:
+    """The ROS 2 side: a session listening where rmw_zenoh's router would."""
+    config = zenoh.Config()
+    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
 def subscribed(ros: zenoh.Session, *keys: str) -> None:
     """Waits until the bridge's subscriptions to ``keys`` have reached the graph's session:
     a put before that would go nowhere."""
@@ -60,9 +68,6 @@ def key(fmt: str, topic: str, typename: str) -> str:
 @pytest.mark.parametrize("fmt", ["rmw_zenoh", "bridge"])
 def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt):
     port = free_port()
-    graph = zenoh.Config()  # the ROS 2 side: where rmw_zenoh's router would listen
-    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    graph.insert_json5("scouting/multicast/enabled", "false")
     outputs: dict[str, bytes] = {}
     attachments: dict[str, bytes | None] = {}
 
@@ -70,7 +75,7 @@ def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt)
         outputs[str(s.key_expr)] = s.payload.to_bytes()
         attachments[str(s.key_expr)] = None if s.attachment is None else s.attachment.to_bytes()
 
-    with zenoh.open(graph) as ros:
+    with graph(port) as ros:
         ros.declare_subscriber("**", heard)
         config = Config(
             robot=RobotOptions(name="a", fleet="f", store=str(tmp_path / "a.db")),
@@ -144,9 +149,6 @@ def test_the_tf_tree_hangs_every_robots_map_under_its_groups_reference():
 
 def test_depth_images_with_their_camera_info_become_frames():
     port = free_port()
-    graph = zenoh.Config()
-    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    graph.insert_json5("scouting/multicast/enabled", "false")
     ts = ros2.typestore("jazzy")
     header = T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](10, 0), "camera")
     depth = np.full((6, 8), 2000, np.uint16)  # a wall 2 m ahead, in millimetres
@@ -158,7 +160,7 @@ def test_depth_images_with_their_camera_info_become_frames():
                                            np.eye(3).ravel(), np.zeros(12), 0, 0, roi)  # fmt: skip
     options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), depth_topic="/camera/depth",
                          depth_stride=2)  # fmt: skip
-    with zenoh.open(graph) as ros:
+    with graph(port) as ros:
         bridge = Ros2Bridge("a", options)
         try:
             image_key = ros2.rmw_zenoh_key("/camera/depth", ros2.IMAGE)
@@ -192,13 +194,10 @@ def test_depth_images_with_their_camera_info_become_frames():
 
 def test_poses_from_one_tf_edge_down_to_the_clouds_frame():
     port = free_port()
-    graph = zenoh.Config()
-    graph.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    graph.insert_json5("scouting/multicast/enabled", "false")
     options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), tf_parent="odom", key_format="bridge")
     moved = np.eye(4)
     moved[0, 3] = 1.0
-    with zenoh.open(graph) as ros:
+    with graph(port) as ros:
         bridge = Ros2Bridge("a", options)
         try:
             subscribed(ros, ros2.bridge_key("/points"), ros2.bridge_key("/tf"))
