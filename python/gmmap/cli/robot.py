@@ -106,7 +106,8 @@ def command(
         o = config.ros
         bridge = Ros2Bridge(config.robot.name, o)
         frames = bridge.live
-        log(f"{config.robot.name}: ROS 2 over Zenoh ({o.key_format}, {o.distro}), {o.connect}")
+        at = ", ".join(o.connect)
+        log(f"{config.robot.name}: ROS 2 over Zenoh ({o.key_format}, {o.distro}) at {at}")
     else:
         frames = pick(_frames(data, simulated, sim_index, stride, config))
     truth: dict[str, list] = {}
