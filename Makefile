@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 export RUSTFLAGS ?= -C target-cpu=native
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 
-.PHONY: demo test install lint bench clean
+.PHONY: demo test install lint bench clean ros1
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -42,3 +42,13 @@ bench: install
 
 clean:
 	rm -rf $(VENV) target
+
+# ROS 1 from Debian (for gmmap robot --ros1 and tests/test_ros1.py): the system Python 3.11's
+# rospy and message packages, which the node finds beside the venv's own.
+ROS1_PACKAGES := ros-core python3-rospy python3-rosbag python3-sensor-msgs python3-tf2-ros \
+	python3-nav-msgs python3-visualization-msgs python3-tf2-msgs
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+ros1:
+	$(SUDO) apt-get install -y --no-install-recommends $(ROS1_PACKAGES) || \
+	  ($(SUDO) apt-get update && $(SUDO) apt-get install -y --no-install-recommends $(ROS1_PACKAGES))
+

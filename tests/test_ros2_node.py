@@ -16,7 +16,7 @@ from gmmap.fleet.robot import RobotNode
 from gmmap.fleet.transport import free_port
 from gmmap.io import ros2
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.io.ros2bridge import Ros2Bridge, _tf_tree
+from gmmap.io.ros2bridge import Ros2Bridge, tf_tree
 from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.options import BuildOptions, RobotOptions, RosOptions
 
@@ -132,7 +132,7 @@ def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt)
             node.stop()
 
 
-def test_the_tf_tree_hangs_every_robots_map_under_its_groups_reference():
+def test_thetf_tree_hangs_every_robots_map_under_its_groups_reference():
     T_ab = np.eye(4)
     T_ab[0, 3] = 2.0
     frames = SimpleNamespace(
@@ -141,7 +141,7 @@ def test_the_tf_tree_hangs_every_robots_map_under_its_groups_reference():
         to_reference=lambda r: T_ab if r == "b" else np.eye(4),
     )
     node = SimpleNamespace(mapper=SimpleNamespace(result=object(), frames=frames))
-    tree = _tf_tree(node, 5.0)
+    tree = tf_tree(node, 5.0)
     assert [(p, c) for p, c, _, _ in tree] == [("a/map", "b/map")]  # c is alone: no edge
     decoded = ros2.decode_tf(ros2.encode_tf(tree))
     assert decoded[0].parent == "a/map" and np.allclose(decoded[0].pose, T_ab)

@@ -34,6 +34,7 @@ from gmmap.config import Config
 @click.option("--sim", "simulated", is_flag=True, help="Map a simulated robot (sim section).")
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
 @click.option("--ros2", is_flag=True, help="Map live ROS 2 topics over Zenoh (the ros section).")
+@click.option("--ros1", is_flag=True, help="Map live ROS 1 topics (make ros1; the ros section).")
 @sim_settings
 @click.option("--stride", type=int, help="--data (TUM): pixel stride of the back-projection.")
 @ros_settings
@@ -79,6 +80,7 @@ def command(
     data: Path | None,
     simulated: bool,
     ros2: bool,
+    ros1: bool,
     sim_index: int,
     stride: int | None,
     pick,
@@ -97,8 +99,8 @@ def command(
 
     if config.security.credentials is None:
         log(f"{config.robot.name}: plain TCP, submaps unsigned (no --credentials: a trusted lab)")
-    if sum((data is not None, simulated, ros2)) != 1:
-        raise click.UsageError("give exactly one of --data, --sim and --ros2")
+    if sum((data is not None, simulated, ros2, ros1)) != 1:
+        raise click.UsageError("give exactly one of --data, --sim, --ros2 and --ros1")
     bridge = None
     if ros2:
         from gmmap.io.ros2bridge import Ros2Bridge
@@ -108,6 +110,12 @@ def command(
         frames = bridge.live
         at = ", ".join(o.connect)
         log(f"{config.robot.name}: ROS 2 over Zenoh ({o.key_format}, {o.distro}) at {at}")
+    elif ros1:
+        from gmmap.io.ros1bridge import Ros1Bridge
+
+        bridge = Ros1Bridge(config.robot.name, config.ros)
+        frames = bridge.live
+        log(f"{config.robot.name}: ROS 1 node gmmap_{config.robot.name}")
     else:
         frames = pick(_frames(data, simulated, sim_index, stride, config))
     truth: dict[str, list] = {}

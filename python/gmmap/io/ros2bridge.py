@@ -40,9 +40,12 @@ log = logging.getLogger(__name__)
 MAP_POINTS = 20_000  # points sampled from the merged map for points_topic
 
 
-class Ros2Bridge:
-    """ROS 2 topics → ``live`` (by default a `LiveInput` through ``ros.extrinsic``), and the
-    node's outputs → ROS 2, for robot ``robot``."""
+class Bridge:
+    """What the ROS 1 and ROS 2 sides share: the live input they feed (by default through
+    ``ros.extrinsic``), their counts, and publishing the node's outputs every
+    ``publish_every_s`` (`publish`, theirs) from `attach` until `close`."""
+
+    name = "ROS"
 
     def __init__(self, robot: str, options: RosOptions, live: LiveInput | None = None) -> None:
         if live is None:
@@ -50,10 +53,43 @@ class Ros2Bridge:
             live = LiveInput(extrinsic=mount)
         self.robot, self.options, self.live = robot, options, live
         self.counts = {"clouds": 0, "poses": 0, "bad": 0, "published": 0}
+        self._stop = threading.Event()
+
+    def attach(self, node) -> threading.Thread:
+        """Publishes ``node``'s outputs every ``publish_every_s`` until `close`."""
+
+        def run() -> None:
+            while not self._stop.wait(self.options.publish_every_s):
+                try:
+                    self.publish(node)
+                except Exception:
+                    log.exception("%s: publishing to %s failed", self.robot, self.name)
+
+        thread = threading.Thread(target=run, name=f"gmmap-{self.name}-{self.robot}", daemon=True)
+        thread.start()
+        return thread
+
+    def publish(self, node) -> None:
+        raise NotImplementedError
+
+    def status(self, node) -> dict:
+        return {**node.status(), "live": vars(self.live.counts), "ros": dict(self.counts)}
+
+    def close(self) -> None:
+        self._stop.set()
+        self.live.close()
+
+
+class Ros2Bridge(Bridge):
+    """ROS 2 topics over Zenoh → ``live``, and the node's outputs → ROS 2, for ``robot``."""
+
+    name = "ROS 2"
+
+    def __init__(self, robot: str, options: RosOptions, live: LiveInput | None = None) -> None:
+        super().__init__(robot, options, live)
         self._seq = 0
         self._gid = os.urandom(ros2.GID_SIZE)
         self._markers = 0  # markers sent last time: the extra ones are deleted
-        self._stop = threading.Event()
         cfg = zenoh.Config()
         entries = {"mode": "peer", "connect/endpoints": list(options.connect),
                    "listen/endpoints": [], "scouting/multicast/enabled": False}  # fmt: skip
@@ -135,20 +171,6 @@ class Ros2Bridge:
 
     # ---- out --------------------------------------------------------------------------------
 
-    def attach(self, node) -> threading.Thread:
-        """Publishes ``node``'s outputs every ``publish_every_s`` until `close`."""
-
-        def run() -> None:
-            while not self._stop.wait(self.options.publish_every_s):
-                try:
-                    self.publish(node)
-                except Exception:
-                    log.exception("%s: publishing to ROS 2 failed", self.robot)
-
-        thread = threading.Thread(target=run, name=f"gmmap-ros2-{self.robot}", daemon=True)
-        thread.start()
-        return thread
-
     def publish(self, node) -> None:
         """The merged map, the TF tree and the status, once."""
         o, d, now = self.options, self.options.distro, time.time()
@@ -163,11 +185,10 @@ class Ros2Bridge:
             self._put(
                 o.points_topic, ros2.POINTCLOUD2, ros2.encode_pointcloud2(points, frame, now, d)
             )
-        tree = _tf_tree(node, now)
+        tree = tf_tree(node, now)
         if tree:
             self._put("/tf", ros2.TF_MESSAGE, ros2.encode_tf(tree, d))
-        status = {**node.status(), "live": vars(self.live.counts), "ros2": dict(self.counts)}
-        self._put(o.status_topic, ros2.STRING, ros2.encode_status(status, d))
+        self._put(o.status_topic, ros2.STRING, ros2.encode_status(self.status(node), d))
 
     def _put(self, topic: str, typename: str, payload: bytes) -> None:
         self._seq += 1
@@ -179,12 +200,11 @@ class Ros2Bridge:
         self.counts["published"] += 1
 
     def close(self) -> None:
-        self._stop.set()
-        self.live.close()
+        super().close()
         self.session.close()
 
 
-def _tf_tree(node, stamp: float) -> list[tuple[str, str, np.ndarray, float]]:
+def tf_tree(node, stamp: float) -> list[tuple[str, str, np.ndarray, float]]:
     """Each robot's map frame under its group's reference robot's: a star per group."""
     mapper = node.mapper
     if mapper.result is None:
