@@ -9,6 +9,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -57,19 +58,24 @@ def odometry(f):
                                       twist)  # fmt: skip
 
 
-def write_bag(path, frames):
+def write_bag(path, robots: dict[str, list]):
+    """A ROS 1 bag of each robot's clouds and odometry, under ``/<robot>`` ("": no prefix)."""
     with Writer(path) as bag:
-        c = bag.add_connection("/camera/depth/points", "sensor_msgs/msg/PointCloud2", typestore=TS)
-        o = bag.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=TS)
-        for f in frames:
-            t = round(f.stamp * 1e9)
-            bag.write(o, t - 1000, TS.serialize_ros1(odometry(f), "nav_msgs/msg/Odometry"))
-            bag.write(c, t, TS.serialize_ros1(cloud(f), "sensor_msgs/msg/PointCloud2"))
+        for prefix, frames in robots.items():
+            c = bag.add_connection(f"{prefix}/camera/depth/points", "sensor_msgs/msg/PointCloud2",
+                                   typestore=TS)  # fmt: skip
+            o = bag.add_connection(f"{prefix}/odom", "nav_msgs/msg/Odometry", typestore=TS)
+            for f in frames:
+                t = round(f.stamp * 1e9)
+                bag.write(o, t - 1000, TS.serialize_ros1(odometry(f), "nav_msgs/msg/Odometry"))
+                bag.write(c, t, TS.serialize_ros1(cloud(f), "sensor_msgs/msg/PointCloud2"))
     return path
 
 
-@pytest.fixture
-def roscore(tmp_path):
+@pytest.fixture(scope="module")
+def roscore(tmp_path_factory):
+    """One master for the module: rospy lets a process be one node, once."""
+    tmp_path = tmp_path_factory.mktemp("ros")
     port = free_port()
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp_path)}
     proc = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
@@ -86,9 +92,26 @@ def roscore(tmp_path):
         return True
 
     assert wait(up, 20), "roscore did not start"
+    ros1bridge.rospy().init_node("gmmap_test_listener", anonymous=True, disable_signals=True)
     yield env
+    ros1bridge.rospy().signal_shutdown("the tests are done")
     os.killpg(proc.pid, signal.SIGINT)
     proc.wait(timeout=20)
+
+
+def robot(name: str, config, report, roscore, *extra) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", "from gmmap.cli import main; main()", "robot", "--id", name,
+         "--fleet", "f", "--ros1", "--config", str(config), "--linger", "0.5",
+         "--report", str(report), *extra],
+        env=roscore, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+
+
+def subscribed(topics) -> bool:
+    """Whether the ROS master has a subscriber to each of ``topics``."""
+    state = __import__("rosgraph").Master("/gmmap_test").getSystemState()[1]
+    return set(topics) <= {t for t, _ in state}
 
 
 def test_the_ros1_node_maps_a_played_bag_and_publishes_map_tf_and_status(tmp_path, roscore):
@@ -97,38 +120,79 @@ def test_the_ros1_node_maps_a_played_bag_and_publishes_map_tf_and_status(tmp_pat
     from visualization_msgs.msg import MarkerArray
 
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
-    bag = write_bag(tmp_path / "tum.bag", frames)
+    bag = write_bag(tmp_path / "tum.bag", {"": frames})
     config = tmp_path / "robot.yaml"
     config.write_text(
         "ros: {cloud_topic: /camera/depth/points, odom_topic: /odom, publish_every_s: 0.5}\n"
         "build: {frames_per_submap: 2, n_components: 60, covariance: full}\n"
     )
     report = tmp_path / "a.json"
-    node = subprocess.Popen(
-        [sys.executable, "-c", "from gmmap.cli import main; main()", "robot", "--id", "a",
-         "--fleet", "f", "--ros1", "--config", str(config), "--linger", "0.5",
-         "--report", str(report)],
-        env=roscore, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    node = robot("a", config, report, roscore)
     heard: dict = {}
-    rospy.init_node("gmmap_test_listener", anonymous=True, disable_signals=True)
-    rospy.Subscriber("/gmmap/status", String, lambda m: heard.__setitem__("status", m.data))
-    rospy.Subscriber("/gmmap/map", MarkerArray, lambda m: heard.__setitem__("map", m))
+    subs = [
+        rospy.Subscriber("/gmmap/status", String, lambda m: heard.__setitem__("status", m.data)),
+        rospy.Subscriber("/gmmap/map", MarkerArray, lambda m: heard.__setitem__("map", m)),
+    ]
     try:
-        master = __import__("rosgraph").Master("/gmmap_test")
-        subscribed = lambda: any(  # noqa: E731
-            t == "/camera/depth/points" for t, _ in master.getSystemState()[1]
-        )
-        assert wait(subscribed, 30), "the gmmap node did not subscribe"
+        assert wait(lambda: subscribed(["/camera/depth/points"]), 30), "the node did not subscribe"
         subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
         mapped = lambda: "status" in heard and json.loads(heard["status"])["live"]["mapped"] == 8  # noqa: E731
         assert wait(mapped, 60), heard.get("status")
         assert wait(lambda: "map" in heard and len(heard["map"].markers) > 0, 30)
         assert {m.ns for m in heard["map"].markers} == {"a"}
     finally:
-        rospy.signal_shutdown("the test is done")
+        for sub in subs:
+            sub.unregister()
         node.send_signal(signal.SIGINT)
         _, err = node.communicate(timeout=60)
     assert node.returncode == 0, err[-2000:]
     r = json.loads(report.read_text())
     assert r["submaps_built"] == 4 and r["interrupted"]
+
+
+def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_path, roscore):
+    """The bundled frames split in two robots (0-3 and 4-7: one desk, one mocap frame), each
+    a ROS 1 node on its own topics; their fleet link is Zenoh."""
+    rospy = ros1bridge.rospy()
+    from tf2_msgs.msg import TFMessage
+
+    frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
+    bag = write_bag(tmp_path / "two.bag", {"/a": frames[0:4], "/b": frames[4:8]})
+    ports = {"a": free_port(), "b": free_port()}
+    nodes = []
+    for name, other in (("a", "b"), ("b", "a")):
+        config = tmp_path / f"{name}.yaml"
+        config.write_text(
+            f"ros: {{cloud_topic: /{name}/camera/depth/points, odom_topic: /{name}/odom,"
+            f" map_topic: /{name}/gmmap/map, points_topic: /{name}/gmmap/map_points,"
+            f" status_topic: /{name}/gmmap/status, publish_every_s: 0.5}}\n"
+            "build: {frames_per_submap: 2, n_components: 60, covariance: full}\n"
+            "backend: {min_matches: 1}\n"
+        )
+        peer = ("--peer", f"tcp/127.0.0.1:{ports[other]}", "--port", str(ports[name]))
+        nodes.append(robot(name, config, tmp_path / f"{name}.json", roscore, *peer))
+    edges: dict = {}
+
+    def on_tf(msg) -> None:
+        for t in msg.transforms:
+            edges[(t.header.frame_id, t.child_frame_id)] = t.transform.translation
+
+    sub = rospy.Subscriber("/tf", TFMessage, on_tf)
+    try:
+        topics = ["/a/camera/depth/points", "/b/camera/depth/points"]
+        assert wait(lambda: subscribed(topics), 30), "the nodes did not subscribe"
+        subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
+        assert wait(lambda: ("a/map", "b/map") in edges, 60), edges
+        time.sleep(1.5)  # both nodes have published their tree by now
+        assert set(edges) == {("a/map", "b/map")}  # one tree: the reference's map above b's
+        t = edges[("a/map", "b/map")]
+        assert np.linalg.norm([t.x, t.y, t.z]) < 0.05  # one mocap frame: the identity
+    finally:
+        sub.unregister()
+        for node in nodes:
+            node.send_signal(signal.SIGINT)
+        outs = [node.communicate(timeout=60) for node in nodes]
+    assert [n.returncode for n in nodes] == [0, 0], [err[-1500:] for _, err in outs]
+    for name in ("a", "b"):
+        r = json.loads((tmp_path / f"{name}.json").read_text())
+        assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]
