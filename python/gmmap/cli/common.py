@@ -111,14 +111,21 @@ def _slice(text: str) -> slice:
     return slice(*parts)
 
 
-def open_data(path: Path, stride: int | None = None, ros: RosOptions | None = None, **options):
-    """The dataset at ``path``; a ROS bag with the topics and frames of ``ros`` (the config's
-    ``ros`` section, `gmmap.options.RosOptions`)."""
+def open_data(
+    path: Path,
+    stride: int | None = None,
+    ros: RosOptions | None = None,
+    format: str | None = None,
+    **options,
+):
+    """The dataset at ``path`` (``format``: None, detected); a ROS bag with the topics and
+    frames of ``ros`` (the config's ``ros`` section, `gmmap.options.RosOptions`)."""
     from gmmap.io import datasets
 
-    if ros is not None and datasets.detect_format(path) == "rosbag":
+    if ros is not None and (format or datasets.detect_format(path)) == "rosbag":
         options = {**ros.bag_options(), **options}
-    return datasets.open(path, **({"stride": stride} if stride else {}), **options)
+    given = {"stride": stride} if stride else {}
+    return datasets.open(path, format=format, **given, **options)
 
 
 ROS_SETTINGS = (

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from gmmap.cli.common import config_option, ros_settings
+from gmmap.cli.common import config_option, open_data, ros_settings
 from gmmap.config import Config
 
 
@@ -47,11 +47,8 @@ def command(
     """
     from gmmap.io import datasets
 
-    given = dict(stride=stride, voxel=voxel)
-    options = {k: v for k, v in given.items() if v is not None}
-    if (fmt or datasets.detect_format(path)) == "rosbag":
-        options.update(config.ros.bag_options())
-    seq = datasets.open(path, format=fmt, **options)
+    options = {} if voxel is None else {"voxel": voxel}
+    seq = open_data(path, stride, config.ros, fmt, **options)
     r = {"path": str(path), **datasets.describe(seq, max_frames=max(1, sample))}
     if as_json:
         click.echo(json.dumps(r))

@@ -21,9 +21,9 @@ import numpy as np
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.io.datasets.rosbag import decode_pointcloud2
 from gmmap.io.ros2bridge import MAP_POINTS, Bridge, tf_tree
-from gmmap.io.ros2msgs import ellipsoids, robot_color
+from gmmap.io.ros2msgs import ellipsoids, pose_matrix, robot_color
 from gmmap.mapping.live import LiveInput
-from gmmap.math.geometry import matrix_to_quaternion, quaternion_to_matrix
+from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.options import RosOptions
 
 log = logging.getLogger(__name__)
@@ -55,16 +55,6 @@ def available() -> bool:
     return True
 
 
-def _pose(position, orientation) -> np.ndarray:
-    T = np.eye(4)
-    q = np.array([[orientation.x, orientation.y, orientation.z, orientation.w]], dtype=float)
-    if not np.isfinite(q).all() or np.linalg.norm(q) == 0:
-        raise InvalidInputError("a pose with a zero or non-finite quaternion")
-    T[:3, :3] = quaternion_to_matrix(q / np.linalg.norm(q))[0]
-    T[:3, 3] = [position.x, position.y, position.z]
-    return T
-
-
 class Ros1Bridge(Bridge):
     """ROS 1 topics → ``live``, and the node's outputs → ROS 1, for ``robot``."""
 
@@ -80,7 +70,7 @@ class Ros1Bridge(Bridge):
         from visualization_msgs.msg import MarkerArray
 
         ros.init_node(f"gmmap_{robot}", anonymous=False, disable_signals=True)
-        self._ros, self._sensor = ros, ""
+        self._ros = ros
         o = options
         self._subs = [
             ros.Subscriber(o.cloud_topic or "/points", PointCloud2, self._safe(self._cloud))
@@ -111,24 +101,20 @@ class Ros1Bridge(Bridge):
     def _cloud(self, msg) -> None:
         view = SimpleNamespace(**{k: getattr(msg, k) for k in msg.__slots__})
         view.data = np.frombuffer(msg.data, np.uint8)  # rospy gives bytes
-        points = decode_pointcloud2(view)
-        self._sensor = msg.header.frame_id
-        self.live.push_frame(msg.header.stamp.to_sec(), points)
-        self.counts["clouds"] += 1
+        self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, decode_pointcloud2(view))
 
     def _odom(self, msg) -> None:
         p = msg.pose.pose
-        self.live.push_pose(msg.header.stamp.to_sec(), _pose(p.position, p.orientation))
-        self.counts["poses"] += 1
+        pose = pose_matrix(p.position, p.orientation, "Odometry pose")
+        self._pose(msg.header.stamp.to_sec(), pose)
 
     def _tf(self, msg) -> None:
-        o = self.options
-        want = tuple(w.lstrip("/") for w in (o.tf_parent or "", o.tf_child or self._sensor))
         for t in msg.transforms:
-            if (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")) == want:
+            parent, child = t.header.frame_id, t.child_frame_id
+            if self._is_base(parent, child):
                 r = t.transform
-                self.live.push_pose(t.header.stamp.to_sec(), _pose(r.translation, r.rotation))
-                self.counts["poses"] += 1
+                pose = pose_matrix(r.translation, r.rotation, f"tf {parent}->{child}")
+                self._pose(t.header.stamp.to_sec(), pose)
 
     def publish(self, node) -> None:
         """The merged map, the TF tree and the status, once."""

@@ -53,7 +53,24 @@ class Bridge:
             live = LiveInput(extrinsic=mount)
         self.robot, self.options, self.live = robot, options, live
         self.counts = {"clouds": 0, "poses": 0, "bad": 0, "published": 0}
+        self._sensor = ""  # the frames' frame_id: /tf's child where ros.tf_child is unset
         self._stop = threading.Event()
+
+    def _frame(self, stamp: float, frame_id: str, points: np.ndarray) -> None:
+        # Counted once handed on: a waiter on the counts finds the frame in the live input.
+        self._sensor = frame_id
+        self.live.push_frame(stamp, points)
+        self.counts["clouds"] += 1
+
+    def _pose(self, stamp: float, pose: np.ndarray) -> None:
+        self.live.push_pose(stamp, pose)
+        self.counts["poses"] += 1
+
+    def _is_base(self, parent: str, child: str) -> bool:
+        """Whether a /tf edge is ``tf_parent`` → ``tf_child`` (default the frames' frame)."""
+        o = self.options
+        want = (o.tf_parent or "", o.tf_child or self._sensor)
+        return (parent.lstrip("/"), child.lstrip("/")) == tuple(w.lstrip("/") for w in want)
 
     def attach(self, node) -> threading.Thread:
         """Publishes ``node``'s outputs every ``publish_every_s`` until `close`."""
@@ -101,7 +118,6 @@ class Ros2Bridge(Bridge):
             raise TransportError(f"cannot open the ROS 2 Zenoh session: {err}") from err
         o = options
         self._camera: ros2.Camera | None = None
-        self._sensor = ""  # the frames' frame_id: /tf's child where ros.tf_child is unset
         if o.depth_topic is not None:
             info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
             self._subs = [self._subscribe(info, ros2.CAMERA_INFO, self._camera_info),
@@ -143,9 +159,7 @@ class Ros2Bridge(Bridge):
         self._push(ros2.decode_pointcloud2(data, self.options.distro))
 
     def _push(self, cloud: ros2.Cloud) -> None:
-        self._sensor = cloud.frame_id
-        self.live.push_frame(cloud.stamp, cloud.points)
-        self.counts["clouds"] += 1
+        self._frame(cloud.stamp, cloud.frame_id, cloud.points)
 
     def _camera_info(self, data: bytes) -> None:
         self._camera = ros2.decode_camera_info(data, self.options.distro)
@@ -158,16 +172,12 @@ class Ros2Bridge(Bridge):
 
     def _odom(self, data: bytes) -> None:
         p = ros2.decode_odometry(data, self.options.distro)
-        self.live.push_pose(p.stamp, p.pose)
-        self.counts["poses"] += 1
+        self._pose(p.stamp, p.pose)
 
     def _tf(self, data: bytes) -> None:
-        o = self.options
-        want = tuple(w.lstrip("/") for w in (o.tf_parent or "", o.tf_child or self._sensor))
-        for p in ros2.decode_tf(data, o.distro):
-            if (p.parent.lstrip("/"), p.child.lstrip("/")) == want:
-                self.live.push_pose(p.stamp, p.pose)
-                self.counts["poses"] += 1
+        for p in ros2.decode_tf(data, self.options.distro):
+            if self._is_base(p.parent, p.child):
+                self._pose(p.stamp, p.pose)
 
     # ---- out --------------------------------------------------------------------------------
 

@@ -103,7 +103,7 @@ def _stamp(t: Any) -> float:
     return t.sec + t.nanosec * 1e-9
 
 
-def _matrix(position: Any, rotation: Any, what: str) -> np.ndarray:
+def pose_matrix(position: Any, rotation: Any, what: str) -> np.ndarray:
     """A 4x4 pose from a geometry_msgs Point/Vector3 and Quaternion (normalised here)."""
     t = np.array([[position.x, position.y, position.z]], dtype=np.float64)
     q = np.array([[rotation.x, rotation.y, rotation.z, rotation.w]], dtype=np.float64)
@@ -191,7 +191,7 @@ def decode_odometry(data: bytes | bytearray | memoryview, distro: str = "jazzy")
     twist dropped)."""
     msg = _deserialize(data, ODOMETRY, distro)
     pose = msg.pose.pose
-    matrix = _matrix(pose.position, pose.orientation, "Odometry pose")
+    matrix = pose_matrix(pose.position, pose.orientation, "Odometry pose")
     return StampedPose(_stamp(msg.header.stamp), msg.header.frame_id, msg.child_frame_id, matrix)
 
 
@@ -201,7 +201,8 @@ def decode_tf(data: bytes | bytearray | memoryview, distro: str = "jazzy") -> li
     out = []
     for tr in msg.transforms:
         parent, child = tr.header.frame_id, tr.child_frame_id
-        matrix = _matrix(tr.transform.translation, tr.transform.rotation, f"tf {parent}->{child}")
+        r = tr.transform
+        matrix = pose_matrix(r.translation, r.rotation, f"tf {parent}->{child}")
         out.append(StampedPose(_stamp(tr.header.stamp), parent, child, matrix))
     return out
 
