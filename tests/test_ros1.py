@@ -14,19 +14,24 @@ import time
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from conftest import wait
 from gmmap.fleet.transport import free_port
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
-from gmmap.math.geometry import matrix_to_quaternion
+from gmmap.io.datasets.tum import read_depth
+from gmmap.math.geometry import make_poses, matrix_to_quaternion
 
 pytestmark = pytest.mark.skipif(
     not (ros1bridge.available() and shutil.which("roscore") and shutil.which("rosbag")),
     reason=f"ROS 1 is not installed: {ros1bridge.SETUP}",
 )
 TS = get_typestore(Stores.ROS1_NOETIC)
+# rosbags' Noetic store lacks tf2_msgs; its definition is one line
+TS.register(
+    get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
+)
 T = TS.types
 
 
@@ -69,6 +74,47 @@ def write_bag(path, robots: dict[str, list]):
                 t = round(f.stamp * 1e9)
                 bag.write(o, t - 1000, TS.serialize_ros1(odometry(f), "nav_msgs/msg/Odometry"))
                 bag.write(c, t, TS.serialize_ros1(cloud(f), "sensor_msgs/msg/PointCloud2"))
+    return path
+
+
+def transform(stamp: float, parent: str, child: str, pose: np.ndarray):
+    q = T["geometry_msgs/msg/Quaternion"](*matrix_to_quaternion(pose[None, :3, :3])[0])
+    r = T["geometry_msgs/msg/Transform"](T["geometry_msgs/msg/Vector3"](*pose[:3, 3]), q)
+    stamped = T["geometry_msgs/msg/TransformStamped"](header(stamp, parent), child, r)
+    return T["tf2_msgs/msg/TFMessage"]([stamped])
+
+
+def write_depth_bag(path, data: TumRgbd, frames: range, mount: np.ndarray):
+    """A ROS 1 bag of depth images (16UC1 mm) with their CameraInfo, odom → base_link on /tf
+    and the camera's mounting base_link → camera on /tf_static."""
+    k = data.intrinsics
+    roi = T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
+    K = np.array([k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1], float)
+    P = np.array([k.fx, 0, k.cx, 0, 0, k.fy, k.cy, 0, 0, 0, 1, 0], float)
+    with Writer(path) as bag:
+        add = lambda topic, kind: bag.add_connection(topic, kind, typestore=TS)  # noqa: E731
+        depth, info = (
+            add("/camera/depth/image", "sensor_msgs/msg/Image"),
+            add("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo"),
+        )
+        tf, static = (
+            add("/tf", "tf2_msgs/msg/TFMessage"),
+            add("/tf_static", "tf2_msgs/msg/TFMessage"),
+        )
+        put = lambda c, t, m: bag.write(c, t, TS.serialize_ros1(m, m.__msgtype__))  # noqa: E731
+        t0 = round(data.stamps[frames[0]] * 1e9)
+        put(static, t0 - 10**6, transform(0.0, "base_link", "camera", mount))
+        for i in frames:
+            stamp, t = data.stamps[i], round(data.stamps[i] * 1e9)
+            base = data.poses[i] @ np.linalg.inv(mount)
+            put(tf, t - 2000, transform(stamp, "odom", "base_link", base))
+            mm = (read_depth(data.files[i]).astype(np.float64) / 5).astype("<u2")  # TUM: 5000/m
+            h, w = mm.shape
+            put(info, t - 1000, T["sensor_msgs/msg/CameraInfo"](header(stamp, "camera"), h, w,
+                "plumb_bob", np.zeros(5), K, np.eye(3).ravel(), P, 0, 0, roi))  # fmt: skip
+            image = np.frombuffer(mm.tobytes(), np.uint8)
+            put(depth, t, T["sensor_msgs/msg/Image"](header(stamp, "camera"), h, w, "16UC1",
+                                                     0, 2 * w, image))  # fmt: skip
     return path
 
 
@@ -196,3 +242,42 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
     for name in ("a", "b"):
         r = json.loads((tmp_path / f"{name}.json").read_text())
         assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]
+
+
+def test_the_ros1_node_maps_depth_images_posed_by_a_tf_chain(tmp_path, roscore):
+    """Depth images with their CameraInfo; poses from /tf odom → base_link composed with the
+    camera's mounting on /tf_static (the chain's lower end: the images' frame)."""
+    rospy = ros1bridge.rospy()
+    from std_msgs.msg import String
+
+    data = TumRgbd(BUNDLED_TUM_SLICE)
+    mount = make_poses(np.array([[0.1, 0.0, 0.3]]), np.array([[0.0, 0.0, 0.7071068, 0.7071068]]))[0]
+    bag = write_depth_bag(tmp_path / "depth.bag", data, range(8), mount)
+    config = tmp_path / "robot.yaml"
+    config.write_text(
+        "ros: {depth_topic: /camera/depth/image, depth_stride: 2, tf_parent: odom,"
+        " publish_every_s: 0.5}\n"
+        "build: {frames_per_submap: 2, n_components: 60, covariance: full}\n"
+    )
+    report = tmp_path / "d.json"
+    node = robot("d", config, report, roscore)
+    heard: dict = {}
+    sub = rospy.Subscriber("/gmmap/status", String, lambda m: heard.__setitem__("s", m.data))
+    try:
+        assert wait(lambda: subscribed(["/camera/depth/image", "/tf_static"]), 30)
+        subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
+        mapped = lambda: "s" in heard and json.loads(heard["s"])["live"]["mapped"] == 8  # noqa: E731
+        assert wait(mapped, 60), heard.get("s")
+    finally:
+        sub.unregister()
+        node.send_signal(signal.SIGINT)
+        _, err = node.communicate(timeout=60)
+    assert node.returncode == 0, err[-2000:]
+    status = json.loads(heard["s"])
+    assert status["live"]["no_pose"] == 0 and status["ros"]["bad"] == 0
+    r = json.loads(report.read_text())
+    assert r["submaps_built"] == 4
+    # Each submap's anchor sits at its first frame's camera: the chain's, mount included.
+    for key, pose in r["poses"].items():
+        first = data.poses[2 * int(key.split("/")[1])]
+        assert np.linalg.norm(first[:3, 3] - np.asarray(pose)[:3, 3]) < 1e-4, key

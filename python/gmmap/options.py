@@ -384,9 +384,8 @@ class RosOptions:
     ``connect`` (rmw_zenoh's router listens on tcp/127.0.0.1:7447); live, ``cloud_topic`` and
     ``odom_topic`` default to /points and /odom; with ``depth_topic``, depth images (16UC1 or
     32FC1, every ``depth_stride``-th pixel) with the intrinsics of ``camera_info_topic``
-    (default: camera_info beside the depth topic) instead of clouds; /tf gives poses only where
-    it carries
-    ``tf_parent`` → ``tf_child`` as one transform. Out, every ``publish_every_s``: the merged
+    (default: camera_info beside the depth topic) instead of clouds; with ``tf_parent``, poses
+    from the chain of /tf and /tf_static as in bags (`gmmap.io.tfchain`). Out, every ``publish_every_s``: the merged
     map on ``map_topic`` (MarkerArray of ellipsoids) and ``points_topic`` (PointCloud2 sampled
     from it), the frames between the robots' maps on /tf (a spanning tree:
     ``<reference>/map`` → ``<robot>/map``), and a JSON status on ``status_topic``."""

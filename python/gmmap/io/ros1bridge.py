@@ -2,10 +2,12 @@
 ros-core, python3-rospy and the message packages, for the system Python 3.11).
 
 The same inputs and outputs as the ROS 2 side (`gmmap.io.ros2bridge`, `gmmap.options.RosOptions`):
-sensor_msgs/PointCloud2 on ``cloud_topic`` and nav_msgs/Odometry on ``odom_topic`` (or one
-/tf edge ``tf_parent`` → ``tf_child``) in; the merged map as a MarkerArray of ellipsoids and a
-sampled PointCloud2, the TF tree between the robots' maps on /tf and a JSON status out.
-rospy runs the node against the ROS master of ``ROS_MASTER_URI``.
+sensor_msgs/PointCloud2 on ``cloud_topic``, or depth sensor_msgs/Image on ``depth_topic`` with
+its CameraInfo, and nav_msgs/Odometry on ``odom_topic`` (or, with ``tf_parent``, the chain of
+/tf and /tf_static down to ``tf_child``: `gmmap.io.tfchain`) in; the merged map as a
+MarkerArray of ellipsoids and a sampled PointCloud2, the TF tree between the robots' maps on
+/tf and a JSON status out. rospy runs the node against the ROS master of ``ROS_MASTER_URI``;
+/tf_static is latched there, so a node started late still gets the mountings.
 """
 
 from __future__ import annotations
@@ -21,7 +23,14 @@ import numpy as np
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.io.datasets.rosbag import decode_pointcloud2
 from gmmap.io.ros2bridge import MAP_POINTS, Bridge, tf_tree
-from gmmap.io.ros2msgs import ellipsoids, pose_matrix, robot_color
+from gmmap.io.ros2msgs import (
+    Camera,
+    camera_of,
+    depth_points,
+    ellipsoids,
+    pose_matrix,
+    robot_color,
+)
 from gmmap.mapping.live import LiveInput
 from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.options import RosOptions
@@ -64,7 +73,7 @@ class Ros1Bridge(Bridge):
         super().__init__(robot, options, live)
         ros = rospy()
         from nav_msgs.msg import Odometry
-        from sensor_msgs.msg import PointCloud2
+        from sensor_msgs.msg import CameraInfo, Image, PointCloud2
         from std_msgs.msg import String
         from tf2_msgs.msg import TFMessage
         from visualization_msgs.msg import MarkerArray
@@ -72,14 +81,22 @@ class Ros1Bridge(Bridge):
         ros.init_node(f"gmmap_{robot}", anonymous=False, disable_signals=True)
         self._ros = ros
         o = options
-        self._subs = [
-            ros.Subscriber(o.cloud_topic or "/points", PointCloud2, self._safe(self._cloud))
-        ]
-        if o.tf_parent is not None:
-            self._subs.append(ros.Subscriber("/tf", TFMessage, self._safe(self._tf)))
+        self._camera: Camera | None = None
+
+        def sub(topic: str, kind, handle):
+            return ros.Subscriber(topic, kind, self._safe(handle))
+
+        if o.depth_topic is not None:
+            info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
+            self._subs = [sub(info, CameraInfo, self._camera_info),
+                          sub(o.depth_topic, Image, self._depth)]  # fmt: skip
         else:
-            topic = o.odom_topic or "/odom"
-            self._subs.append(ros.Subscriber(topic, Odometry, self._safe(self._odom)))
+            self._subs = [sub(o.cloud_topic or "/points", PointCloud2, self._cloud)]
+        if o.tf_parent is not None:
+            self._subs += [sub("/tf", TFMessage, self._tf),
+                           sub("/tf_static", TFMessage, self._tf_static)]  # fmt: skip
+        else:
+            self._subs.append(sub(o.odom_topic or "/odom", Odometry, self._odom))
         self._pubs = {
             "map": ros.Publisher(o.map_topic, MarkerArray, queue_size=1, latch=True),
             "points": ros.Publisher(o.points_topic, PointCloud2, queue_size=1, latch=True),
@@ -103,18 +120,28 @@ class Ros1Bridge(Bridge):
         view.data = np.frombuffer(msg.data, np.uint8)  # rospy gives bytes
         self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, decode_pointcloud2(view))
 
+    def _camera_info(self, msg) -> None:
+        self._camera = camera_of(msg, msg.K)
+
+    def _depth(self, msg) -> None:
+        if self._camera is None:  # no intrinsics yet: nothing to back-project with
+            raise InvalidInputError("a depth image before its CameraInfo")
+        points = depth_points(msg, self._camera, self.options.depth_stride)
+        self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, points)
+
     def _odom(self, msg) -> None:
         p = msg.pose.pose
         pose = pose_matrix(p.position, p.orientation, "Odometry pose")
         self._pose(msg.header.stamp.to_sec(), pose)
 
-    def _tf(self, msg) -> None:
+    def _tf(self, msg, static: bool = False) -> None:
         for t in msg.transforms:
-            parent, child = t.header.frame_id, t.child_frame_id
-            if self._is_base(parent, child):
-                r = t.transform
-                pose = pose_matrix(r.translation, r.rotation, f"tf {parent}->{child}")
-                self._pose(t.header.stamp.to_sec(), pose)
+            parent, child, r = t.header.frame_id, t.child_frame_id, t.transform
+            pose = pose_matrix(r.translation, r.rotation, f"tf {parent}->{child}")
+            self._transform(parent, child, t.header.stamp.to_sec(), pose, static)
+
+    def _tf_static(self, msg) -> None:
+        self._tf(msg, static=True)
 
     def publish(self, node) -> None:
         """The merged map, the TF tree and the status, once."""
@@ -129,7 +156,7 @@ class Ros1Bridge(Bridge):
             self._pubs["points"].publish(self._cloud_of(gmap.sample(MAP_POINTS), frame))
         tree = tf_tree(node, now)
         if tree:
-            self._pubs["tf"].publish(TFMessage([self._transform(*t) for t in tree]))
+            self._pubs["tf"].publish(TFMessage([self._stamped(*t) for t in tree]))
         self._pubs["status"].publish(String(json.dumps(self.status(node), sort_keys=True)))
         self.counts["published"] += 1
 
@@ -161,7 +188,7 @@ class Ros1Bridge(Bridge):
 
         return point_cloud2.create_cloud_xyz32(self._header(frame), points.tolist())
 
-    def _transform(self, parent: str, child: str, T: np.ndarray, _stamp: float):
+    def _stamped(self, parent: str, child: str, T: np.ndarray, _stamp: float):
         from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 
         q = matrix_to_quaternion(T[None, :3, :3])[0]

@@ -9,8 +9,10 @@ fleet's: ROS traffic never goes on the fleet's links, and the fleet's keys never
 
 In: sensor_msgs/PointCloud2 on ``cloud_topic``, or sensor_msgs/Image depth on ``depth_topic``
 with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on
-``odom_topic``, or tf2_msgs/TFMessage on /tf where it carries ``tf_parent`` → ``tf_child``,
-→ `LiveInput.push_pose`. A message that does not decode is counted and dropped. Subscriptions
+``odom_topic``, or tf2_msgs/TFMessage on /tf and /tf_static: the chain from ``tf_parent`` down
+to ``tf_child`` (`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is taken as it is
+published: a node that starts after the mountings were sent does not get them (rmw_zenoh's
+transient-local history was not followed here), so give those as ``ros.extrinsic``. A message that does not decode is counted and dropped. Subscriptions
 in rmw_zenoh's format take any type hash (a Humble publisher sends none) and check it where
 given. Out, every ``publish_every_s``: the group's merged map as a MarkerArray and as a
 sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a loop) and the status.
@@ -32,6 +34,7 @@ import zenoh
 
 from gmmap.errors import InvalidInputError, TransportError
 from gmmap.io import ros2
+from gmmap.io.tfchain import TfChain
 from gmmap.mapping.live import LiveInput
 from gmmap.options import RosOptions
 
@@ -53,12 +56,15 @@ class Bridge:
             live = LiveInput(extrinsic=mount)
         self.robot, self.options, self.live = robot, options, live
         self.counts = {"clouds": 0, "poses": 0, "bad": 0, "published": 0}
-        self._sensor = ""  # the frames' frame_id: /tf's child where ros.tf_child is unset
+        # Poses from /tf: the chain down to ros.tf_child, or to the clouds' frame once known.
+        o = options
+        self.tf = None if o.tf_parent is None else TfChain(o.tf_parent, o.tf_child)
         self._stop = threading.Event()
 
     def _frame(self, stamp: float, frame_id: str, points: np.ndarray) -> None:
+        if self.tf is not None and self.tf.child is None:
+            self._poses(self.tf.set_child(frame_id))
         # Counted once handed on: a waiter on the counts finds the frame in the live input.
-        self._sensor = frame_id
         self.live.push_frame(stamp, points)
         self.counts["clouds"] += 1
 
@@ -66,11 +72,14 @@ class Bridge:
         self.live.push_pose(stamp, pose)
         self.counts["poses"] += 1
 
-    def _is_base(self, parent: str, child: str) -> bool:
-        """Whether a /tf edge is ``tf_parent`` → ``tf_child`` (default the frames' frame)."""
-        o = self.options
-        want = (o.tf_parent or "", o.tf_child or self._sensor)
-        return (parent.lstrip("/"), child.lstrip("/")) == tuple(w.lstrip("/") for w in want)
+    def _poses(self, poses: list[tuple[float, np.ndarray]]) -> None:
+        for stamp, pose in poses:
+            self._pose(stamp, pose)
+
+    def _transform(self, parent: str, child: str, stamp: float, T: np.ndarray, static: bool):
+        """One transform of /tf (``static``: of /tf_static) into the chain."""
+        if self.tf is not None:
+            self._poses(self.tf.add(parent, child, stamp, T, static))
 
     def attach(self, node) -> threading.Thread:
         """Publishes ``node``'s outputs every ``publish_every_s`` until `close`."""
@@ -127,6 +136,7 @@ class Ros2Bridge(Bridge):
             self._subs = [self._subscribe(cloud, ros2.POINTCLOUD2, self._cloud)]
         if o.tf_parent is not None:
             self._subs.append(self._subscribe("/tf", ros2.TF_MESSAGE, self._tf))
+            self._subs.append(self._subscribe("/tf_static", ros2.TF_MESSAGE, self._tf_static))
         else:
             self._subs.append(self._subscribe(o.odom_topic or "/odom", ros2.ODOMETRY, self._odom))
 
@@ -174,10 +184,12 @@ class Ros2Bridge(Bridge):
         p = ros2.decode_odometry(data, self.options.distro)
         self._pose(p.stamp, p.pose)
 
-    def _tf(self, data: bytes) -> None:
+    def _tf(self, data: bytes, static: bool = False) -> None:
         for p in ros2.decode_tf(data, self.options.distro):
-            if self._is_base(p.parent, p.child):
-                self._pose(p.stamp, p.pose)
+            self._transform(p.parent, p.child, p.stamp, p.pose, static)
+
+    def _tf_static(self, data: bytes) -> None:
+        self._tf(data, static=True)
 
     # ---- out --------------------------------------------------------------------------------
 

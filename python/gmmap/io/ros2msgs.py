@@ -124,10 +124,16 @@ def decode_pointcloud2(data: bytes | bytearray | memoryview, distro: str = "jazz
 
 
 def decode_camera_info(data: bytes | bytearray | memoryview, distro: str = "jazzy") -> Camera:
-    """A CameraInfo → the intrinsics of K. Distortion is ignored (the back-projection assumes a
-    rectified depth image); binning, a partial ROI or a skewed K are refused, not misapplied."""
+    """A CameraInfo → its intrinsics (`camera_of`)."""
     msg = _deserialize(data, CAMERA_INFO, distro)
-    K = np.asarray(msg.k, dtype=np.float64)
+    return camera_of(msg, msg.k)
+
+
+def camera_of(msg: Any, K: Any) -> Camera:
+    """The intrinsics of a CameraInfo message of ROS 1 or 2 (``K``: its ``K`` or ``k``).
+    Distortion is ignored (the back-projection assumes a rectified depth image); binning, a
+    partial ROI or a skewed K are refused, not misapplied."""
+    K = np.asarray(K, dtype=np.float64)
     roi = msg.roi
     full_roi = roi.width in (0, msg.width) and roi.height in (0, msg.height)
     if msg.binning_x > 1 or msg.binning_y > 1 or roi.x_offset or roi.y_offset or not full_roi:
@@ -144,12 +150,19 @@ def decode_camera_info(data: bytes | bytearray | memoryview, distro: str = "jazz
 def decode_depth_image(
     data: bytes | bytearray | memoryview, camera: Camera, stride: int = 1, distro: str = "jazzy"
 ) -> Cloud:
-    """A depth Image (16UC1 millimetres or 32FC1 metres) → points in the camera optical frame
-    (x right, y down, z forward), one per ``stride``-th pixel of every ``stride``-th row;
-    pixels without depth (0, NaN, inf, negative) are skipped."""
+    """A depth Image → its points (`depth_points`)."""
+    msg = _deserialize(data, IMAGE, distro)
+    points = depth_points(msg, camera, stride)
+    return Cloud(_stamp(msg.header.stamp), msg.header.frame_id, points)
+
+
+def depth_points(msg: Any, camera: Camera, stride: int = 1) -> np.ndarray:
+    """A depth Image message of ROS 1 or 2 (16UC1 millimetres or 32FC1 metres) → float32
+    points in the camera optical frame (x right, y down, z forward), one per ``stride``-th
+    pixel of every ``stride``-th row; pixels without depth (0, NaN, inf, negative) are
+    skipped."""
     if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
         raise InvalidInputError(f"stride must be an integer >= 1, got {stride!r}")
-    msg = _deserialize(data, IMAGE, distro)
     if camera.width and (msg.width, msg.height) != (camera.width, camera.height):
         raise RosMessageError(
             f"depth image is {msg.width}x{msg.height}, its CameraInfo {camera.width}x"
@@ -161,9 +174,7 @@ def decode_depth_image(
     z = z[ok]
     x = (u[ok] - camera.cx) * z / camera.fx
     y = (v[ok] - camera.cy) * z / camera.fy
-    return Cloud(
-        _stamp(msg.header.stamp), msg.header.frame_id, np.stack([x, y, z], 1).astype(np.float32)
-    )
+    return np.stack([x, y, z], 1).astype(np.float32)
 
 
 def _depth_metres(msg: Any) -> np.ndarray:
@@ -175,7 +186,8 @@ def _depth_metres(msg: Any) -> np.ndarray:
     code, scale = DEPTH_ENCODINGS[msg.encoding]
     dtype = np.dtype(code).newbyteorder(">" if msg.is_bigendian else "<")
     row_bytes = msg.width * dtype.itemsize
-    data = np.asarray(msg.data, dtype=np.uint8)
+    raw = msg.data  # rosbags: a uint8 array; rospy: bytes
+    data = np.frombuffer(raw, np.uint8) if isinstance(raw, bytes) else np.asarray(raw, np.uint8)
     if msg.step < row_bytes or len(data) < msg.height * msg.step:
         raise RosMessageError(
             f"depth image of {len(data)} bytes for {msg.height} rows of step {msg.step} "
