@@ -13,109 +13,19 @@ import time
 
 import numpy as np
 import pytest
-from rosbags.rosbag1 import Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from conftest import wait
 from gmmap.fleet.transport import free_port
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.io.datasets.tum import read_depth
-from gmmap.math.geometry import make_poses, matrix_to_quaternion
+from gmmap.io.ros1bag import write_cloud_bag, write_depth_bag
+from gmmap.math.geometry import make_poses
 
 pytestmark = pytest.mark.skipif(
     not (ros1bridge.available() and shutil.which("roscore") and shutil.which("rosbag")),
     reason=f"ROS 1 is not installed: {ros1bridge.SETUP}",
 )
-TS = get_typestore(Stores.ROS1_NOETIC)
-# rosbags' Noetic store lacks tf2_msgs; its definition is one line
-TS.register(
-    get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
-)
-T = TS.types
-
-
-def header(stamp: float, frame: str):
-    sec = int(stamp)
-    return T["std_msgs/msg/Header"](
-        0, T["builtin_interfaces/msg/Time"](sec, int((stamp - sec) * 1e9)), frame
-    )
-
-
-def cloud(f):
-    pts = np.ascontiguousarray(f.points, dtype="<f4")
-    fields = [T["sensor_msgs/msg/PointField"](a, 4 * i, 7, 1) for i, a in enumerate("xyz")]
-    data = np.frombuffer(pts.tobytes(), np.uint8)
-    return T["sensor_msgs/msg/PointCloud2"](
-        header(f.stamp, "camera"), 1, len(pts), fields, False, 12, 12 * len(pts), data, True
-    )
-
-
-def odometry(f):
-    q = T["geometry_msgs/msg/Quaternion"](*matrix_to_quaternion(f.pose[None, :3, :3])[0])
-    pose = T["geometry_msgs/msg/Pose"](T["geometry_msgs/msg/Point"](*f.pose[:3, 3]), q)
-    vec = T["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0)
-    twist = T["geometry_msgs/msg/TwistWithCovariance"](
-        T["geometry_msgs/msg/Twist"](vec, vec), np.zeros(36)
-    )
-    return T["nav_msgs/msg/Odometry"](header(f.stamp, "odom"), "camera",
-                                      T["geometry_msgs/msg/PoseWithCovariance"](pose, np.zeros(36)),
-                                      twist)  # fmt: skip
-
-
-def write_bag(path, robots: dict[str, list]):
-    """A ROS 1 bag of each robot's clouds and odometry, under ``/<robot>`` ("": no prefix)."""
-    with Writer(path) as bag:
-        for prefix, frames in robots.items():
-            c = bag.add_connection(f"{prefix}/camera/depth/points", "sensor_msgs/msg/PointCloud2",
-                                   typestore=TS)  # fmt: skip
-            o = bag.add_connection(f"{prefix}/odom", "nav_msgs/msg/Odometry", typestore=TS)
-            for f in frames:
-                t = round(f.stamp * 1e9)
-                bag.write(o, t - 1000, TS.serialize_ros1(odometry(f), "nav_msgs/msg/Odometry"))
-                bag.write(c, t, TS.serialize_ros1(cloud(f), "sensor_msgs/msg/PointCloud2"))
-    return path
-
-
-def transform(stamp: float, parent: str, child: str, pose: np.ndarray):
-    q = T["geometry_msgs/msg/Quaternion"](*matrix_to_quaternion(pose[None, :3, :3])[0])
-    r = T["geometry_msgs/msg/Transform"](T["geometry_msgs/msg/Vector3"](*pose[:3, 3]), q)
-    stamped = T["geometry_msgs/msg/TransformStamped"](header(stamp, parent), child, r)
-    return T["tf2_msgs/msg/TFMessage"]([stamped])
-
-
-def write_depth_bag(path, data: TumRgbd, frames: range, mount: np.ndarray):
-    """A ROS 1 bag of depth images (16UC1 mm) with their CameraInfo, odom → base_link on /tf
-    and the camera's mounting base_link → camera on /tf_static."""
-    k = data.intrinsics
-    roi = T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
-    K = np.array([k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1], float)
-    P = np.array([k.fx, 0, k.cx, 0, 0, k.fy, k.cy, 0, 0, 0, 1, 0], float)
-    with Writer(path) as bag:
-        add = lambda topic, kind: bag.add_connection(topic, kind, typestore=TS)  # noqa: E731
-        depth, info = (
-            add("/camera/depth/image", "sensor_msgs/msg/Image"),
-            add("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo"),
-        )
-        tf, static = (
-            add("/tf", "tf2_msgs/msg/TFMessage"),
-            add("/tf_static", "tf2_msgs/msg/TFMessage"),
-        )
-        put = lambda c, t, m: bag.write(c, t, TS.serialize_ros1(m, m.__msgtype__))  # noqa: E731
-        t0 = round(data.stamps[frames[0]] * 1e9)
-        put(static, t0 - 10**6, transform(0.0, "base_link", "camera", mount))
-        for i in frames:
-            stamp, t = data.stamps[i], round(data.stamps[i] * 1e9)
-            base = data.poses[i] @ np.linalg.inv(mount)
-            put(tf, t - 2000, transform(stamp, "odom", "base_link", base))
-            mm = (read_depth(data.files[i]).astype(np.float64) / 5).astype("<u2")  # TUM: 5000/m
-            h, w = mm.shape
-            put(info, t - 1000, T["sensor_msgs/msg/CameraInfo"](header(stamp, "camera"), h, w,
-                "plumb_bob", np.zeros(5), K, np.eye(3).ravel(), P, 0, 0, roi))  # fmt: skip
-            image = np.frombuffer(mm.tobytes(), np.uint8)
-            put(depth, t, T["sensor_msgs/msg/Image"](header(stamp, "camera"), h, w, "16UC1",
-                                                     0, 2 * w, image))  # fmt: skip
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +76,7 @@ def test_the_ros1_node_maps_a_played_bag_and_publishes_map_tf_and_status(tmp_pat
     from visualization_msgs.msg import MarkerArray
 
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
-    bag = write_bag(tmp_path / "tum.bag", {"": frames})
+    bag = write_cloud_bag(tmp_path / "tum.bag", {"": frames})
     config = tmp_path / "robot.yaml"
     config.write_text(
         "ros: {cloud_topic: /camera/depth/points, odom_topic: /odom, publish_every_s: 0.5}\n"
@@ -203,7 +113,7 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
     from tf2_msgs.msg import TFMessage
 
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
-    bag = write_bag(tmp_path / "two.bag", {"/a": frames[0:4], "/b": frames[4:8]})
+    bag = write_cloud_bag(tmp_path / "two.bag", {"/a": frames[0:4], "/b": frames[4:8]})
     ports = {"a": free_port(), "b": free_port()}
     nodes = []
     for name, other in (("a", "b"), ("b", "a")):
@@ -252,7 +162,13 @@ def test_the_ros1_node_maps_depth_images_posed_by_a_tf_chain(tmp_path, roscore):
 
     data = TumRgbd(BUNDLED_TUM_SLICE)
     mount = make_poses(np.array([[0.1, 0.0, 0.3]]), np.array([[0.0, 0.0, 0.7071068, 0.7071068]]))[0]
-    bag = write_depth_bag(tmp_path / "depth.bag", data, range(8), mount)
+    mm = [(read_depth(f).astype(np.float64) / 5).astype(np.uint16) for f in data.files[:8]]  # TUM
+    bag = write_depth_bag(
+        tmp_path / "depth.bag",
+        zip(data.stamps[:8], data.poses[:8], mm, strict=True),
+        data.intrinsics,
+        mount,
+    )
     config = tmp_path / "robot.yaml"
     config.write_text(
         "ros: {depth_topic: /camera/depth/image, depth_stride: 2, tf_parent: odom,"

@@ -378,17 +378,19 @@ class RosOptions:
     /tf_static: the chain from ``tf_parent`` (the odom or map frame) down to ``tf_child`` (None:
     the clouds' frame). ``extrinsic``: the sensor in that frame (4×4 rows; None: identity).
 
-    Live over ROS 2 (``gmmap robot --ros2``, `gmmap.io.ros2bridge`): the topics in
-    ``key_format`` ``rmw_zenoh`` (ROS ``domain_id``, type hashes of ``distro``) or ``bridge``
+    Live over ROS 2 (``gmmap robot --ros2``, `gmmap.io.ros2bridge`): the topics in ``key_format``
+    ``rmw_zenoh`` (ROS ``domain_id``, type hashes of ``distro``) or ``bridge``
     (zenoh-bridge-ros2dds: the topic name as the key), on a Zenoh session connecting to
     ``connect`` (rmw_zenoh's router listens on tcp/127.0.0.1:7447); live, ``cloud_topic`` and
     ``odom_topic`` default to /points and /odom; with ``depth_topic``, depth images (16UC1 or
     32FC1, every ``depth_stride``-th pixel) with the intrinsics of ``camera_info_topic``
     (default: camera_info beside the depth topic) instead of clouds; with ``tf_parent``, poses
-    from the chain of /tf and /tf_static as in bags (`gmmap.io.tfchain`). Out, every ``publish_every_s``: the merged
-    map on ``map_topic`` (MarkerArray of ellipsoids) and ``points_topic`` (PointCloud2 sampled
-    from it), the frames between the robots' maps on /tf (a spanning tree:
-    ``<reference>/map`` → ``<robot>/map``), and a JSON status on ``status_topic``."""
+    from the chain of /tf and /tf_static as in bags (`gmmap.io.tfchain`). Out, every
+    ``publish_every_s``: the merged map on ``map_topic`` (MarkerArray of ellipsoids) and
+    ``points_topic`` (PointCloud2 sampled from it), the frames between the robots' maps on /tf
+    (a spanning tree: ``<reference>/map`` → ``<robot>/map``), and a JSON status on
+    ``status_topic``. Live over ROS 1 (``gmmap robot --ros1``, `gmmap.io.ros1bridge`): the same
+    topics, frames and outputs, through the ROS master."""
 
     cloud_topic: str | None = None
     odom_topic: str | None = None
