@@ -8,16 +8,16 @@ bridge opens its own Zenoh session to ``ros.connect`` (the ROS graph's router), 
 fleet's: ROS traffic never goes on the fleet's links, and the fleet's keys never reach ROS.
 
 In: sensor_msgs/PointCloud2 on ``cloud_topic``, or sensor_msgs/Image depth on ``depth_topic``
-with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on
-``odom_topic``, or tf2_msgs/TFMessage on /tf and /tf_static: the chain from ``tf_parent`` down
-to ``tf_child`` (`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is taken as it is
-published: a node that starts after the mountings were sent does not get them (rmw_zenoh's
-transient-local history was not followed here), so give those as ``ros.extrinsic``. A message that does not decode is counted and dropped. Subscriptions
-in rmw_zenoh's format take any type hash (a Humble publisher sends none) and check it where
-given. Out, every ``publish_every_s``: the group's merged map as a MarkerArray and as a
-sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a loop) and the status.
-What a running ROS 2 graph would show of these was not tested here: the formats were, against
-rosbags' serialisation and type hashes.
+with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on ``odom_topic``, or
+tf2_msgs/TFMessage on /tf and /tf_static: the chain from ``tf_parent`` down to ``tf_child``
+(`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is taken as it is published: a node
+that starts after the mountings were sent does not get them (rmw_zenoh's transient-local history
+was not followed here), so give those as ``ros.extrinsic``. A message that does not decode is
+counted and dropped. Subscriptions in rmw_zenoh's format take any type hash (a Humble publisher
+sends none) and check it where given. Out, every ``publish_every_s``: the group's merged map as
+a MarkerArray and as a sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a
+loop) and the status. What a running ROS 2 graph would show of these was not tested here: the
+formats were, against rosbags' serialisation and type hashes.
 """
 
 from __future__ import annotations
