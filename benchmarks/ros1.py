@@ -172,13 +172,13 @@ def _pin(cores: set):
 
 
 def roscore(tmp: Path, others: set) -> tuple[subprocess.Popen, dict]:
+    ros1bridge.rospy()  # puts Debian's ROS 1 packages, rosgraph among them, on the path
     port = free_port()
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp)}
     proc = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True,
                             preexec_fn=_pin(others))  # fmt: skip
     os.environ.update(ROS_MASTER_URI=env["ROS_MASTER_URI"], ROS_HOME=str(tmp))
-    ros1bridge.rospy()  # puts Debian's ROS 1 packages, rosgraph among them, on the path
     master = __import__("rosgraph").Master("/gmmap_bench")
     for _ in range(200):
         try:
@@ -186,6 +186,7 @@ def roscore(tmp: Path, others: set) -> tuple[subprocess.Popen, dict]:
             return proc, env
         except Exception:
             time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
     raise RuntimeError("roscore did not start")
 
 
