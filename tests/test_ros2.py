@@ -714,3 +714,53 @@ def test_status_is_json_in_a_string():
             ros2.encode_status(bad)
     with pytest.raises(RosMessageError):
         ros2.decode_status(cdr(T["std_msgs/msg/String"]("not json"), ros2.STRING))
+
+
+# rmw_zenoh's design.md examples, verbatim.
+LISTENER = "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener"
+TALKER = (
+    "@ros2_lv/0/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/"
+    "std_msgs::msg::dds_::String_/"
+    "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18/::,7:,:,:,,"
+)
+
+
+def test_liveliness_tokens_are_rmw_zenohs_own():
+    zids = ("aac3178e146ba6f1fc6e6a4085e77f21", "8b20917502ee955ac4476e0266340d5c")
+    assert ros2.liveliness_token(zids[0], 0, 0, "NN", "listener") == LISTENER
+    talker = ros2.liveliness_token(zids[1], 0, 10, "MP", "talker", "/chatter", ros2.STRING, 7)
+    assert talker == TALKER
+    t = ros2.parse_liveliness_token(TALKER)
+    assert (t.kind, t.node, t.namespace, t.topic, t.typename) == (
+        "MP", "talker", "/", "/chatter", ros2.STRING
+    )  # fmt: skip
+    assert (t.entity_id, t.qos) == (10, "::,7:,:,:,,")
+    assert ros2.parse_liveliness_token(LISTENER).topic is None
+
+
+def test_liveliness_tokens_round_trip_mangled_names_default_depth_and_humble():
+    key = ros2.liveliness_token("ab12", 3, 4, "MS", "gmmap_a", "/robot1/scan", ros2.POINTCLOUD2,
+                                domain=7, distro="humble")  # fmt: skip
+    assert "/%robot1%scan/" in key and key.endswith(f"/{ros2.HUMBLE_TYPE_HASH}/::,:,:,:,,")
+    t = ros2.parse_liveliness_token(key)
+    assert (t.domain, t.node_id, t.entity_id, t.topic) == (7, 3, 4, "/robot1/scan")
+
+
+@pytest.mark.parametrize(
+    "key",
+    [
+        "", "@ros2_lv/0", LISTENER.replace("@ros2_lv", "@ros2"), LISTENER.replace("/NN/", "/XX/"),
+        LISTENER.replace("/0/0/", "/0/x/"), LISTENER + "/%chatter", TALKER.rsplit("/", 1)[0],
+        TALKER.replace("RIHS01_df", "RIHS02_df"), TALKER.replace("/MP/", "/NN/"),
+    ],
+)  # fmt: skip
+def test_malformed_liveliness_tokens_are_refused(key):
+    with pytest.raises(RosMessageError):
+        ros2.parse_liveliness_token(key)
+
+
+def test_a_token_needs_a_hex_zid_a_known_kind_a_ros_node_name_and_a_topic():
+    for args in (("zz", 0, 0, "NN", "n"), ("ab", 0, 0, "QQ", "n"), ("ab", 0, 0, "NN", "1n"),
+                 ("ab", 0, 0, "MP", "n")):  # fmt: skip
+        with pytest.raises(RosMessageError):
+            ros2.liveliness_token(*args)

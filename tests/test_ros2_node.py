@@ -223,3 +223,39 @@ def test_poses_from_one_tf_edge_down_to_the_clouds_frame():
             assert np.isclose(frames[0].pose[0, 3], 0.5)  # halfway between the two
         finally:
             bridge.close()
+
+
+def test_rmw_zenoh_tools_see_the_node_its_subscriptions_and_publishers():
+    """The node's liveliness tokens, as ``ros2 node list`` / ``ros2 topic list`` read them
+    (rmw_zenoh's graph); none in the bridge format, and none once the bridge closes."""
+    port = free_port()
+    with graph(port) as ros:
+        options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), tf_parent="odom")
+        bridge = Ros2Bridge("robot-1.a", options)
+
+        def tokens() -> list:
+            replies = ros.liveliness().get(f"{ros2.LIVELINESS_PREFIX}/0/**", timeout=2)
+            return [ros2.parse_liveliness_token(str(r.ok.key_expr)) for r in replies if r.ok]
+
+        try:
+            assert wait(lambda: len(tokens()) == 8, 10), tokens()
+            seen = tokens()
+        finally:
+            bridge.close()
+        assert {t.node for t in seen} == {"gmmap_robot_1_a"}
+        assert {t.zid for t in seen} == {str(bridge.session.info.zid())}
+        assert len({t.entity_id for t in seen}) == 8
+        by_kind = {k: {(t.topic, t.typename) for t in seen if t.kind == k} for k in ("MS", "MP")}
+        assert by_kind["MS"] == {("/points", ros2.POINTCLOUD2), ("/tf", ros2.TF_MESSAGE),
+                                 ("/tf_static", ros2.TF_MESSAGE)}  # fmt: skip
+        assert by_kind["MP"] == {("/gmmap/map", ros2.MARKER_ARRAY), ("/tf", ros2.TF_MESSAGE),
+                                 ("/gmmap/map_points", ros2.POINTCLOUD2),
+                                 ("/gmmap/status", ros2.STRING)}  # fmt: skip
+        assert all(t.type_hash == ros2.type_hash(t.typename) for t in seen if t.topic)
+        assert wait(lambda: tokens() == [], 10)
+        plain = Ros2Bridge("b", RosOptions(connect=options.connect, key_format="bridge"))
+        try:
+            time.sleep(0.5)
+            assert tokens() == []
+        finally:
+            plain.close()

@@ -16,8 +16,10 @@ was not followed here), so give those as ``ros.extrinsic``. A message that does 
 counted and dropped. Subscriptions in rmw_zenoh's format take any type hash (a Humble publisher
 sends none) and check it where given. Out, every ``publish_every_s``: the group's merged map as
 a MarkerArray and as a sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a
-loop) and the status. What a running ROS 2 graph would show of these was not tested here: the
-formats were, against rosbags' serialisation and type hashes.
+loop) and the status. In rmw_zenoh's format the node, its subscriptions and publishers hold
+rmw_zenoh's liveliness tokens (`ros2keys.liveliness_token`), so ROS 2 tools list them. What a
+running ROS 2 graph would show of these was not tested here: the formats were, against rosbags'
+serialisation and type hashes.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import threading
 import time
 from typing import Any
@@ -125,6 +128,9 @@ class Ros2Bridge(Bridge):
             self.session = zenoh.open(cfg)
         except zenoh.ZError as err:
             raise TransportError(f"cannot open the ROS 2 Zenoh session: {err}") from err
+        self.node_name = "gmmap_" + re.sub(r"[^A-Za-z0-9_]", "_", robot)  # a ROS name token
+        self._tokens: list = []
+        self._declare("NN")
         o = options
         self._camera: ros2.Camera | None = None
         if o.depth_topic is not None:
@@ -139,6 +145,26 @@ class Ros2Bridge(Bridge):
             self._subs.append(self._subscribe("/tf_static", ros2.TF_MESSAGE, self._tf_static))
         else:
             self._subs.append(self._subscribe(o.odom_topic or "/odom", ros2.ODOMETRY, self._odom))
+        for topic, typename, depth in self.outputs():
+            self._declare("MP", topic, typename, depth)
+
+    def outputs(self) -> list[tuple[str, str, int]]:
+        """What `publish` puts: (topic, type, the depth its rmw_zenoh token announces)."""
+        o = self.options
+        return [(o.map_topic, ros2.MARKER_ARRAY, 1), (o.points_topic, ros2.POINTCLOUD2, 1),
+                ("/tf", ros2.TF_MESSAGE, 100), (o.status_topic, ros2.STRING, 1)]  # fmt: skip
+
+    def _declare(self, kind: str, topic: str | None = None, typename: str | None = None,
+                 depth: int = 10) -> None:  # fmt: skip
+        """An rmw_zenoh liveliness token, by which ROS 2 tools see the node and its topics
+        (rmw_zenoh key format only: zenoh-bridge-ros2dds announces DDS endpoints itself)."""
+        o = self.options
+        if o.key_format != "rmw_zenoh":
+            return
+        zid, entity = str(self.session.info.zid()), len(self._tokens)
+        key = ros2.liveliness_token(zid, 0, entity, kind, self.node_name, topic, typename, depth,
+                                    o.domain_id, o.distro)  # fmt: skip
+        self._tokens.append(self.session.liveliness().declare_token(key))
 
     # ---- in ---------------------------------------------------------------------------------
 
@@ -163,6 +189,7 @@ class Ros2Bridge(Bridge):
                 self.counts["bad"] += 1
                 log.debug("%s: dropped a ROS message: %s", self.robot, err)
 
+        self._declare("MS", topic, typename, 100 if topic.startswith("/tf") else 10)
         return self.session.declare_subscriber(self._key(topic, typename, True), on_sample)
 
     def _cloud(self, data: bytes) -> None:
@@ -223,6 +250,8 @@ class Ros2Bridge(Bridge):
 
     def close(self) -> None:
         super().close()
+        for token in self._tokens:
+            token.undeclare()
         self.session.close()
 
 

@@ -1,5 +1,6 @@
-"""Where ROS 2 data lives on Zenoh: key expressions, type names and hashes, and the attachment
-rmw_zenoh puts on every publication. Pure functions (strings and bytes); no Zenoh import.
+"""Where ROS 2 data lives on Zenoh: key expressions, type names and hashes, the attachment
+rmw_zenoh puts on every publication and the liveliness tokens of its graph. Pure functions
+(strings and bytes); no Zenoh import.
 
 Two ways a ROS 2 system puts topics on Zenoh:
 
@@ -152,6 +153,92 @@ def parse_key(key: str, namespace: str = "") -> RosKey:
         prefix = _topic_chunks(namespace, "namespace") + "/"
         chunks = chunks.removeprefix(prefix)
     return RosKey("/" + chunks, None, None)
+
+
+# ---------------------------------------------------------------------------------------------
+# rmw_zenoh's graph: liveliness tokens (liveliness_utils.cpp, jazzy = kilted; design.md's
+# examples are the tests' golden strings). A node and each of its publishers and subscriptions
+# hold one token; ROS 2 tools (`ros2 topic list`, `ros2 topic echo`) learn the graph from them:
+#
+#   @ros2_lv/<domain>/<zid>/<nid>/<id>/<NN|MP|MS|SS|SC>/<enclave>/<namespace>/<node>
+#            [/<topic>/<dds type>/<type hash>/<qos>]
+#
+# Names have every '/' mangled into '%' ('/' alone: '%'). <qos> lists reliability, durability,
+# history and depth, deadline, lifespan and liveliness; a component equal to rmw_zenoh's default
+# (reliable, volatile, keep last, depth 42, infinite durations, automatic) is left empty.
+
+LIVELINESS_PREFIX = "@ros2_lv"
+ENTITIES = {"NN": "node", "MP": "publisher", "MS": "subscription", "SS": "service", "SC": "client"}
+DEFAULT_DEPTH = 42
+
+
+class LivelinessToken(NamedTuple):
+    """One rmw_zenoh graph entity; ``topic``, ``typename``, ``type_hash``, ``qos`` for topics."""
+
+    domain: int
+    zid: str
+    node_id: int
+    entity_id: int
+    kind: str  # a key of ENTITIES
+    namespace: str
+    node: str
+    topic: str | None = None
+    typename: str | None = None
+    type_hash: str | None = None
+    qos: str | None = None
+
+
+def _mangle(name: str) -> str:
+    return name.replace("/", "%")
+
+
+def _demangle(chunk: str) -> str:
+    return chunk.replace("%", "/")
+
+
+def qos_chunk(depth: int = DEFAULT_DEPTH) -> str:
+    """The <qos> chunk of a reliable, volatile, keep-last endpoint of ``depth``."""
+    return f"::,{'' if depth == DEFAULT_DEPTH else int(depth)}:,:,:,,"
+
+
+def liveliness_token(
+    zid: str, node_id: int, entity_id: int, kind: str, node: str, topic: str | None = None,
+    typename: str | None = None, depth: int = DEFAULT_DEPTH, domain: int = 0,
+    distro: str = "jazzy", namespace: str = "/",
+) -> str:  # fmt: skip
+    """The key of one entity's token: a node (``kind`` "NN") or, with ``topic`` and
+    ``typename``, a publisher ("MP") or subscription ("MS")."""
+    if kind not in ENTITIES or not re.fullmatch(r"[0-9a-f]+", zid or ""):
+        raise RosMessageError(f"liveliness token: kind in {sorted(ENTITIES)}, hex zid: {kind}")
+    _topic_chunks(f"/{node}", "node name")
+    head = f"{LIVELINESS_PREFIX}/{_domain(domain)}/{zid}/{node_id}/{entity_id}/{kind}"
+    key = f"{head}/%/{_mangle(namespace)}/{node}"
+    if kind == "NN":
+        return key
+    if topic is None or typename is None:
+        raise RosMessageError(f"a {ENTITIES[kind]} token needs its topic and type")
+    name = "/" + _topic_chunks(topic)
+    hashed = type_hash(typename, distro)
+    return f"{key}/{_mangle(name)}/{dds_type_name(typename)}/{hashed}/{qos_chunk(depth)}"
+
+
+def parse_liveliness_token(key: str) -> LivelinessToken:
+    """The entity a token key names; `RosMessageError` if it is not one."""
+    parts = key.split("/") if isinstance(key, str) else []
+    if len(parts) not in (9, 13) or parts[0] != LIVELINESS_PREFIX or parts[5] not in ENTITIES:
+        raise RosMessageError(f"not an rmw_zenoh liveliness token: {key!r}")
+    if not all(p.isascii() and p.isdigit() for p in parts[1:2] + parts[3:5]):
+        raise RosMessageError(f"liveliness token with a non-numeric id: {key!r}")
+    if (len(parts) == 9) != (parts[5] == "NN"):
+        raise RosMessageError(f"liveliness token of the wrong length for {parts[5]}: {key!r}")
+    head = (int(parts[1]), parts[2], int(parts[3]), int(parts[4]), parts[5])
+    token = LivelinessToken(*head, _demangle(parts[7]), parts[8])
+    if len(parts) == 9:
+        return token
+    if not (_DDS_TYPE.fullmatch(parts[10]) and _HASH.fullmatch(parts[11])):
+        raise RosMessageError(f"liveliness token with a bad type or hash: {key!r}")
+    return token._replace(topic=_demangle(parts[9]), typename=ros_type_name(parts[10]),
+                          type_hash=parts[11], qos=parts[12])  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
