@@ -171,7 +171,7 @@ def test_depth_images_with_their_camera_info_become_frames():
             ros.put(
                 info_key, bytes(ts.serialize_cdr(info, ros2.CAMERA_INFO)), congestion_control=BLOCK
             )
-            time.sleep(0.2)
+            assert wait(lambda: bridge._camera is not None, 10)  # callbacks run on many threads
             ros.put(image_key, bytes(ts.serialize_cdr(image, ros2.IMAGE)), congestion_control=BLOCK)
             ros.put(
                 ros2.rmw_zenoh_key("/odom", ros2.ODOMETRY),
@@ -183,7 +183,7 @@ def test_depth_images_with_their_camera_info_become_frames():
                 odometry(11.0, np.eye(4)),
                 congestion_control=BLOCK,
             )
-            assert wait(lambda: bridge.live.counts.frames == 1 and bridge.counts["poses"] == 2, 5)
+            assert wait(lambda: bridge.live.counts.frames == 1 and bridge.counts["poses"] == 2, 10)
             assert bridge.counts["bad"] == 1  # the image before its CameraInfo
             bridge.live.close()
             (frame,) = list(bridge.live)
