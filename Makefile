@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 export RUSTFLAGS ?= -C target-cpu=native
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 
-.PHONY: demo test install lint bench clean ros1
+.PHONY: demo test install lint bench clean ros1 station
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -52,3 +52,7 @@ ros1:
 	$(SUDO) apt-get install -y --no-install-recommends $(ROS1_PACKAGES) || \
 	  ($(SUDO) apt-get update && $(SUDO) apt-get install -y --no-install-recommends $(ROS1_PACKAGES))
 
+# Debian's Chromium, for tests/test_station.py: a headless browser opens the station's view.
+station:
+	$(SUDO) apt-get install -y --no-install-recommends chromium || \
+	  ($(SUDO) apt-get update && $(SUDO) apt-get install -y --no-install-recommends chromium)

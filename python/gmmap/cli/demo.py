@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -50,13 +51,15 @@ def run_demo(
     log=print,
     crash: tuple[int, int] | None = None,
     secure: bool = False,
+    station: int | None = None,
 ) -> dict:
     """Runs ``config.sim.robots`` robot processes, each started with its own configuration
     file (this tree with its name, store and endpoints), and summarises their reports.
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
     and started again on its store. ``secure``: a new fleet authority and credentials for each
     robot in ``out/fleet``, TLS links, access control and sealed submaps
-    (`gmmap.fleet.access`)."""
+    (`gmmap.fleet.access`). ``station``: a ``gmmap station`` beside them, its view served on
+    that port (`station_command`)."""
     # The robots run in this interpreter: a missing fleet extra is named here, not in n logs.
     import zenoh  # noqa: F401
 
@@ -109,9 +112,16 @@ def run_demo(
             args = (procs, i, cmd, store, crash[1], log, readers)
             crasher = threading.Thread(target=_crash, args=args)
             crasher.start()
+    watcher = None
+    if station is not None:
+        cmd = station_command(config, fleet, ports, out, station, members.get("station"))
+        watcher = _launch(cmd, log, readers)
     if crash:
         crasher.join()
     codes = [p.wait() for p in procs]
+    if watcher is not None:
+        watcher.send_signal(signal.SIGINT)
+        codes.append(watcher.wait(timeout=60))
     for t in readers:
         t.join(timeout=5)
     for relay in relays.values():
@@ -133,6 +143,10 @@ def run_demo(
         from gmmap.eval.wire import wire_report
 
         report.update(wire_report(relays, names, report["received"]))
+    if watcher is not None:
+        seen = json.loads((out / "station.json").read_text())
+        report["station"] = {k: seen[k] for k in ("held", "groups", "submaps_fetched")}
+        report["station"]["rrd"] = str(out / "station.rrd")
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
     report["map_rrd"] = reports[names[0]].get("map_rrd")
@@ -172,11 +186,29 @@ def _credentials(config: Config, folder: Path, fleet: str, names: list[str]) -> 
     import shutil
 
     from gmmap.fleet.access import issue_fleet
+    from gmmap.fleet.credentials import add_member
 
     if config.link.topology == "router":
         raise InvalidInputError("--secure runs mesh or chain links; the router is not secured")
     shutil.rmtree(folder, ignore_errors=True)
-    return issue_fleet(folder, fleet, names)
+    members = issue_fleet(folder, fleet, names)
+    return {**members, "station": add_member(folder, "station", role="station")}
+
+
+def station_command(
+    config: Config, fleet: str, ports: list[int], out: Path, web_port: int, credentials=None
+) -> list[str]:
+    """``gmmap station`` watching the demo's robots (straight to their endpoints), its view
+    served on ``web_port`` and saved to out/station.rrd, its report out/station.json."""
+    from gmmap.fleet.transport import free_port
+
+    scheme = "tcp" if credentials is None else "tls"
+    cmd = [sys.executable, "-c", "from gmmap.cli import main; main()", "station",
+           "--fleet", fleet, "--web-port", str(web_port), "--grpc-port", str(free_port()),
+           "--save", str(out / "station.rrd"), "--report", str(out / "station.json")]  # fmt: skip
+    for port in ports[: config.sim.robots]:
+        cmd += ["--peer", f"{scheme}/127.0.0.1:{port}"]
+    return cmd + ([] if credentials is None else ["--credentials", str(credentials)])
 
 
 def _start_relays(config: Config, ports: list[int], reach=None) -> dict:
@@ -394,6 +426,14 @@ def format_report(r: dict) -> str:
     help="Write bytes over time (the paper's Fig. 9) and map completeness PNGs here.",
 )
 @click.option(
+    "--station",
+    "station_port",
+    type=int,
+    is_flag=False,
+    flag_value=9090,
+    help="Watch the robots from a gmmap station, its view served on this port (default 9090).",
+)
+@click.option(
     "--secure",
     is_flag=True,
     help="Fresh fleet credentials in OUT/fleet: mutual TLS, access control, signed submaps.",
@@ -404,6 +444,7 @@ def command(
     max_frames: int | None,
     out: Path | None,
     plots: Path | None,
+    station_port: int | None,
     secure: bool,
     config: Config,
     as_json: bool,
@@ -413,7 +454,7 @@ def command(
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
     config = backend_follows_drift(config)
-    r = run_demo(config, max_frames, out, log, secure=secure)
+    r = run_demo(config, max_frames, out, log, secure=secure, station=station_port)
     if plots:
         from gmmap.eval.fleetplots import write_plots
 

@@ -95,6 +95,8 @@ class RobotNode:
     ``config.robot`` names it, its fleet and its store; ``config.transport`` its endpoints;
     build, select, place, register and backend configure its mapping."""
 
+    watch = False  # a station (`gmmap.fleet.station`) holds no liveliness token
+
     def __init__(self, config: Config, on_built: BuiltCallback | None = None) -> None:
         self.config = config
         self.robot = config.robot.name
@@ -130,9 +132,8 @@ class RobotNode:
         self.wire = {seq: _sizes(s, n, None) for seq, (s, n) in r.own.items()}  # own seq → bytes
         self._changed.set()
         fleet = config.robot.fleet
-        self.transport = Transport(
-            TransportConfig(fleet, self.robot, config.transport, credentials)
-        )
+        transport = TransportConfig(fleet, self.robot, config.transport, credentials, self.watch)
+        self.transport = Transport(transport)
         self.budget = Budget(config.robot.budget)
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
 
@@ -140,7 +141,7 @@ class RobotNode:
 
     def start(self) -> None:
         t = self.transport
-        t.serve(self.store.fetch_provider, self.store.robots, self.budget)
+        self._serve()
         t.subscribe(self._receive)
         t.on_join(self.holdings.meet)
         t.on_join(self._joined)
@@ -152,6 +153,9 @@ class RobotNode:
             ("fetch", self._fetcher),
         ):
             self._spawn(name, target)
+
+    def _serve(self) -> None:
+        self.transport.serve(self.store.fetch_provider, self.store.robots, self.budget)
 
     def _spawn(self, name: str, target: Callable[..., None], *args: object) -> threading.Thread:
         th = threading.Thread(
@@ -491,9 +495,6 @@ class RobotNode:
 
 
 def _sizes(s: Submap, wire: int, n_points: int | None) -> dict:
-    return {
-        "wire": wire,
-        "points_float32": None if n_points is None else 12 * int(n_points),
-        "gmm_float32": int(s.gmm.float32_bytes),
-        "components": len(s.gmm),
-    }
+    points = None if n_points is None else 12 * int(n_points)
+    return {"wire": wire, "points_float32": points, "gmm_float32": int(s.gmm.float32_bytes),
+            "components": len(s.gmm)}  # fmt: skip

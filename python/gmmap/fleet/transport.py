@@ -105,6 +105,7 @@ class TransportConfig:
     robot: str
     options: TransportOptions = field(default_factory=TransportOptions)
     credentials: Any = None
+    watch: bool = False  # a station: no liveliness token (credentials with its role imply it)
 
     def __post_init__(self) -> None:
         check_name("fleet", self.fleet)
@@ -154,7 +155,7 @@ class Transport:
         try:
             liveliness = self._session.liveliness()
             # A station watches: it is not a robot its peers would wait for.
-            if getattr(config.credentials, "role", None) != "station":
+            if not config.watch and getattr(config.credentials, "role", None) != "station":
                 self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
             self._alive_subscriber = liveliness.declare_subscriber(
                 f"{PREFIX}/{self.fleet}/*", self._on_liveliness, history=True

@@ -1,0 +1,90 @@
+"""``gmmap station``: watch a fleet live in the browser (`gmmap.fleet.station`,
+`gmmap.io.liveview`)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from gmmap.cli.common import config_option, log, setting
+from gmmap.config import Config
+
+
+@click.command("station")
+@setting("--fleet", "robot.fleet", "The fleet to watch.")
+@click.option("--id", "name", default="station", show_default=True, help="The station's name.")
+@setting("--peer", "transport.connect", "Zenoh endpoint of a robot.", multiple=True)
+@setting("--port", "transport.port", "Loopback listen port (0: free).", type=int)
+@setting("--listen", "transport.listen", "Zenoh listen endpoint.", multiple=True)
+@setting("--credentials", "security.credentials", "The station's folder (gmmap fleet add "
+         "--role station): TLS, and Zenoh lets it subscribe and query only.")  # fmt: skip
+@click.option("--web-port", type=int, default=9090, show_default=True,
+              help="Where the Rerun web viewer is served (0: not served).")  # fmt: skip
+@click.option("--grpc-port", type=int, default=9876, show_default=True,
+              help="Where the view data is served (Rerun gRPC).")  # fmt: skip
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address to serve on.")
+@click.option("--save", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also record the view to this .rrd (replay: rerun FILE).")  # fmt: skip
+@click.option("--every", type=float, default=1.0, show_default=True,
+              help="Seconds between view updates.")  # fmt: skip
+@click.option("--duration", type=float, help="Stop after this many seconds (default: Ctrl-C).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
+@config_option
+def command(
+    name: str,
+    web_port: int,
+    grpc_port: int,
+    host: str,
+    save: Path | None,
+    every: float,
+    duration: float | None,
+    report_path: Path | None,
+    config: Config,
+) -> None:
+    """Watch a fleet: receive every submap, merge, and serve a live view in the browser.
+
+    The station sends nothing of its own (no adverts, no answers, no liveliness token); it
+    catches up on what it missed by fetching. Open the printed address; Ctrl-C stops it."""
+    from gmmap.fleet.station import StationNode
+    from gmmap.io.liveview import LiveView
+
+    if every <= 0:
+        raise click.BadParameter("must be > 0", param_hint="--every")
+    config = replace(config, robot=replace(config.robot, name=name))
+    view = LiveView(name, grpc_port, web_port or None, save, host)
+    node = StationNode(config)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    node.start()
+    secured = "secured" if config.security.credentials else "plain TCP"
+    log(f"{name}: watching fleet {config.robot.fleet} ({secured}); view at {view.url or '-'}"
+        f" (data: {view.data_url})")  # fmt: skip
+    end = None if duration is None else time.monotonic() + duration
+    try:
+        watch(node, view, every, stop, end)
+    finally:
+        report = node.report()
+        node.stop()
+    if report_path is not None:
+        report_path.parent.mkdir(parents=True, exist_ok=True)
+        report_path.write_text(json.dumps(report, indent=1, default=str))
+
+
+def watch(node, view, every: float, stop: threading.Event, end: float | None) -> None:
+    """Updates ``view`` every ``every`` s until ``stop`` or ``end``; a line per change."""
+    last = None
+    while not stop.is_set() and (end is None or time.monotonic() < end):
+        view.update(node)
+        held = node.report()["held"]
+        now = (sum(held.values()), node.counts["optimised"])
+        if now != last:
+            log(f"{node.robot}: {now[0]} submaps of {len(held) - 1} robots, groups {node.groups()}")
+            last = now
+        stop.wait(every)

@@ -1,0 +1,85 @@
+"""A base station (``gmmap station``): it watches a fleet and maps what the robots send, and
+sends nothing of its own, so the robots' links and budgets carry what they would without it.
+
+A `StationNode` is a `RobotNode` without frames that holds no liveliness token (its peers do not
+count it, wait for it or tell it anything), advertises nothing and answers no fetch. It takes
+every submap the robots publish, fetches what their adverts show it lacks, and catches up on its
+own: when a robot appears, and every ``sweep_s`` while any is present, it asks each robot it
+knows for what it lacks beyond what has arrived (the owner where present, its relays otherwise),
+and the present robots for those of robots it has not heard of (`Transport.fetch_unknown`).
+Those queries, and their answers, are the only bytes it adds to the fleet's links; a sweep that
+finds nothing costs one query per robot. Its matching, optimisation and merge are the robots'
+own. In a secured fleet its credentials carry the station role: Zenoh's access control lets it
+subscribe and query, nothing else (`gmmap.fleet.access`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from gmmap.config import Config
+from gmmap.fleet.robot import KIND, RobotNode
+
+log = logging.getLogger(__name__)
+
+SWEEP_S = 5.0
+
+
+class StationNode(RobotNode):
+    """Watches ``config.robot.fleet`` under the name ``config.robot.name``."""
+
+    watch = True
+
+    def __init__(self, config: Config, sweep_s: float = SWEEP_S) -> None:
+        super().__init__(config)
+        self.sweep_s = sweep_s
+        self._wake = threading.Event()
+
+    def start(self) -> None:
+        super().start()
+        self._spawn("sweep", self._sweeper)
+
+    def stop(self) -> None:
+        self._wake.set()
+        super().stop()
+
+    def _serve(self) -> None:  # answers no fetch
+        pass
+
+    def _advertise(self, counts: dict[str, int], state: str) -> None:  # tells nothing
+        pass
+
+    def _joined(self, peer: str) -> None:
+        self.arrivals.met(peer)
+        self._wake.set()
+
+    def _sweeper(self) -> None:
+        while not self.stopping:
+            try:
+                self.sweep()
+            except Exception:
+                log.exception("%s: a catch-up sweep failed", self.robot)
+            self._wake.wait(self.sweep_s)
+            self._wake.clear()
+
+    def sweep(self) -> int:
+        """One catch-up round; the submaps it fetched."""
+        t = self.transport
+        peers = set(t.peers())
+        if not peers or self.stopping:
+            return 0
+        known = set(self.store.robots()) | peers
+        fetched = 0
+        for robot, got in t.fetch_unknown(known | {self.robot}, KIND).items():
+            fetched += self._take(robot, got)
+        for robot in sorted(known - {self.robot}):
+            since = self.arrivals.since(robot, self.store.seqs(robot))
+            fetched += self._take(robot, t.fetch(robot, KIND, since, relay=robot not in peers))
+        return fetched
+
+    def _take(self, robot: str, got: list[tuple[int, bytes]]) -> int:
+        before = self.counts["fetched"]
+        for seq, payload in got:
+            self._enqueue_fetched(robot, seq, payload)
+        return self.counts["fetched"] - before

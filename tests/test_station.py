@@ -1,0 +1,161 @@
+"""The base station (`gmmap.fleet.station`, `gmmap.io.liveview`, ``gmmap station``): it joins
+late and still holds every submap, sends nothing, holds no write permission in a secured
+fleet, and a real headless browser (Debian's Chromium) shows its map."""
+
+import base64
+import json
+import shutil
+import subprocess
+import time
+import urllib.request
+
+import numpy as np
+import pytest
+
+from conftest import wait
+from gmmap.config import Config
+from gmmap.fleet.access import issue_fleet
+from gmmap.fleet.credentials import add_member
+from gmmap.fleet.robot import RobotNode
+from gmmap.fleet.station import StationNode
+from gmmap.fleet.transport import free_port
+from gmmap.io import viz
+from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.options import (
+    BackendOptions,
+    BuildOptions,
+    RobotOptions,
+    SecurityOptions,
+    TransportOptions,
+)
+
+BUILD = BuildOptions(frames_per_submap=2, n_components=60, covariance="full")
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return TumRgbd(BUNDLED_TUM_SLICE, stride=2)
+
+
+def config(tmp_path, name, port, peers=(), credentials=None, scheme="tcp") -> Config:
+    return Config(
+        robot=RobotOptions(name=name, fleet="f", store=str(tmp_path / f"{name}.db")),
+        transport=TransportOptions(port=port, connect=[f"{scheme}/127.0.0.1:{p}" for p in peers]),
+        build=BUILD,
+        backend=BackendOptions(min_matches=1),
+        security=SecurityOptions(credentials=None if credentials is None else str(credentials)),
+    )
+
+
+@pytest.fixture
+def fleet(tmp_path, frames, request):
+    """Robots a and b (frames 0-3 and 4-7: one desk) that have mapped, and a station's
+    config connecting to a; secured where the test is parametrised so."""
+    secure = getattr(request, "param", False)
+    members = {}
+    if secure:
+        members = issue_fleet(tmp_path / "fleet", "f", ["a", "b"])
+        members["station"] = add_member(tmp_path / "fleet", "station", role="station")
+    scheme = "tls" if secure else "tcp"
+    ports = {"a": free_port(), "b": free_port()}
+    nodes = []
+    for name, chunk, peers in (("a", frames[0:4], ()), ("b", frames[4:8], (ports["a"],))):
+        node = RobotNode(config(tmp_path, name, ports[name], peers, members.get(name), scheme))
+        node.start()
+        nodes.append(node)
+        node.start_frames(chunk).join()
+    assert wait(lambda: all(n.store.count("a") + n.store.count("b") == 4 for n in nodes), 20)
+    station = config(tmp_path, "station", free_port(), (ports["a"],), members.get("station"),
+                     scheme)  # fmt: skip
+    yield nodes, station
+    for node in nodes:
+        node.stop()
+
+
+@pytest.mark.parametrize("fleet", [False, True], indirect=True, ids=["plain", "secured"])
+def test_a_station_that_joins_late_holds_every_submap_and_sends_nothing(fleet):
+    (a, b), config = fleet
+    before = [n.transport.stats()["totals"].get("received", {}) for n in (a, b)]
+    station = StationNode(config, sweep_s=1.0)
+    station.start()
+    try:
+        assert wait(lambda: station.report()["held"] == {"a": 2, "b": 2, "station": 0}, 30)
+        assert wait(lambda: station.groups() == [["a", "b"]], 30)
+        assert station.transport.stats()["totals"].get("sent", {}).get("messages", 0) == 0
+        assert a.transport.peers() == ["b"] and b.transport.peers() == ["a"]  # not counted
+        station.transport.publish("submap", 0, b"\x00" * 64)  # a put of its own
+        time.sleep(1.0)
+    finally:
+        station.stop()
+    after = [n.transport.stats()["totals"].get("received", {}) for n in (a, b)]
+    if config.security.credentials is not None:  # access control drops it before the door
+        assert after == before
+    assert "station" not in a.store.robots() and "station" not in b.store.robots()
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def _screenshot(url: str, seconds: float, tmp_path) -> np.ndarray | None:
+    """The page at ``url`` in headless Chromium (software GL), after ``seconds``, as RGB."""
+    websocket = pytest.importorskip("websocket", reason="pip install websocket-client")
+    from PIL import Image
+
+    port = free_port()
+    args = [_chromium(), "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader", "--window-size=1280,800",
+            f"--remote-debugging-port={port}", f"--user-data-dir={tmp_path / 'profile'}",
+            url]  # fmt: skip
+    browser = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        targets = []
+
+        def listed() -> bool:
+            nonlocal targets
+            try:
+                targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json"))
+            except OSError:
+                return False
+            return any(t["type"] == "page" for t in targets)
+
+        assert wait(listed, 30), "Chromium did not start"
+        page = next(t for t in targets if t["type"] == "page")
+        ws = websocket.create_connection(page["webSocketDebuggerUrl"], suppress_origin=True)
+        time.sleep(seconds)
+        ws.send(json.dumps({"id": 1, "method": "Page.captureScreenshot"}))
+        while (reply := json.loads(ws.recv())).get("id") != 1:
+            pass
+        ws.close()
+        png = tmp_path / "view.png"
+        png.write_bytes(base64.b64decode(reply["result"]["data"]))
+        return np.asarray(Image.open(png).convert("RGB"))
+    finally:
+        browser.terminate()
+        browser.wait(timeout=20)
+
+
+@pytest.mark.skipif(_chromium() is None, reason="Chromium is not installed (make station)")
+@pytest.mark.skipif(not viz.available(), reason="Rerun is not installed (the viz extra)")
+def test_the_browser_shows_the_merged_map(fleet, tmp_path):
+    from gmmap.io.liveview import LiveView
+    from gmmap.io.ros2msgs import robot_color
+
+    (_a, _b), config = fleet
+    station = StationNode(config, sweep_s=1.0)
+    view = LiveView("station", free_port(), free_port(), tmp_path / "station.rrd")
+    station.start()
+    try:
+        assert wait(lambda: sum(station.report()["held"].values()) == 4, 30)
+        assert wait(lambda: station.groups() == [["a", "b"]], 30)
+        every = {("a", 0), ("a", 1), ("b", 0), ("b", 1)}
+        assert wait(lambda: view.update(station) or view.shown == every, 30)  # optimised
+        shot = _screenshot(view.url, 25, tmp_path)
+    finally:
+        station.stop()
+    middle = shot[60:740, 20:940].reshape(-1, 3).astype(int)  # the 3D view
+    for robot in ("a", "b"):  # each robot's ellipsoids, shaded: near its colour
+        colour = np.array(robot_color(robot)) * 255
+        near = np.linalg.norm(middle - colour, axis=1) < 60
+        assert near.mean() > 0.002, (robot, near.mean())
+    assert (tmp_path / "station.rrd").stat().st_size > 1000  # the same recording, saved
