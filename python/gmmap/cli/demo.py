@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -144,9 +145,7 @@ def run_demo(
 
         report.update(wire_report(relays, names, report["received"]))
     if watcher is not None:
-        seen = json.loads((out / "station.json").read_text())
-        report["station"] = {k: seen[k] for k in ("held", "groups", "submaps_fetched")}
-        report["station"]["rrd"] = str(out / "station.rrd")
+        report["station"] = station_summary(out, reports)
     report["out"] = str(out)
     report["map_png"] = reports[names[0]].get("map_png")
     report["map_rrd"] = reports[names[0]].get("map_rrd")
@@ -193,6 +192,18 @@ def _credentials(config: Config, folder: Path, fleet: str, names: list[str]) -> 
     shutil.rmtree(folder, ignore_errors=True)
     members = issue_fleet(folder, fleet, names)
     return {**members, "station": add_member(folder, "station", role="station")}
+
+
+def station_summary(out: Path, reports: dict[str, dict]) -> dict:
+    """What the demo's station held, cost and how soon it showed each submap after its robot
+    built and sent it (``view_latency_s``: median, max; clock times of one machine)."""
+    seen = json.loads((out / "station.json").read_text())
+    built = {f"{n}/{s['seq']}": s.get("built_at") for n, r in reports.items() for s in r["submaps"]}
+    lags = [t - built[k] for k, t in seen["shown_at"].items() if built.get(k) is not None]
+    summary = {k: seen[k] for k in ("held", "groups", "submaps_fetched", "resources")}
+    median = statistics.median(lags) if lags else None
+    summary["view_latency_s"] = {"median": median, "max": max(lags, default=None)}
+    return {**summary, "shown": len(seen["shown_at"]), "rrd": str(out / "station.rrd")}
 
 
 def station_command(

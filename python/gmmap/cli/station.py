@@ -72,6 +72,8 @@ def command(
     finally:
         report = node.report()
         node.stop()
+    shown = {f"{r}/{seq}": t for (r, seq), t in sorted(view.first_shown.items())}
+    report.update(view_updates=view.updates, shown_at=shown, url=view.url)
     if report_path is not None:
         report_path.parent.mkdir(parents=True, exist_ok=True)
         report_path.write_text(json.dumps(report, indent=1, default=str))

@@ -314,7 +314,7 @@ class RobotNode:
         )
         self.frames_consumed = consumed
         self.counts["built"] += 1
-        self.wire[s.seq] = _sizes(s, len(payload), s.n_points)
+        self.wire[s.seq] = {**_sizes(s, len(payload), s.n_points), "built_at": time.time()}
         self.outbox.put(KIND, s.seq, payload)
         self._enqueue(Arrived("own", self.robot, s.seq, payload))
         if self.on_built is not None:

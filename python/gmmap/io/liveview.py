@@ -3,11 +3,13 @@ the SDK (Rerun's web viewer, connected to a gRPC server in this process) and sav
 that ``rerun station.rrd`` replays.
 
 Each `update` logs, in the reference robot's map frame of each connected group (z up, under
-``groups/<reference>``): every held submap's components as 2-sigma ellipsoids, coloured by
-robot (``…/robots/<robot>/components``); each robot's anchors and trajectory; the kept
-matches as segments between the two submaps' anchors. Beside them, as time series per robot,
-the submaps held and the bytes the station received from it (``links/…/<robot>``). The timeline
-is ``wall`` (clock time): the view grows as the fleet maps.
+``groups/<reference>``): every held submap's components as 2-sigma ellipsoids, coloured by robot
+(``…/robots/<robot>/components``), at its optimised pose or, until the next optimisation places
+it, at its odometry pose (so it shows the moment it arrives; a robot not yet in any group is
+shown alone, in its own map frame); each robot's anchors and trajectory; the kept matches as
+segments between the two submaps' anchors. Beside them, as time series per robot, the submaps
+held and the bytes the station received from it (``links/…/<robot>``). The timeline is ``wall``
+(clock time): the view grows as the fleet maps.
 """
 
 from __future__ import annotations
@@ -65,36 +67,57 @@ class LiveView:
         self.rec.log("groups", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self.updates = 0
         self.shown: set[tuple[str, int]] = set()  # the submaps the last update showed
+        self.first_shown: dict[tuple[str, int], float] = {}  # clock time each first showed
+        self._placed: dict[str, str] = {}  # robot → the group path it was last logged under
 
     def update(self, node) -> None:
         """Logs ``node``'s state now (a `RobotNode` or `StationNode`)."""
         rr, rec = self._rr, self.rec
         rec.set_time("wall", timestamp=time.time())
         mapper, result = node.mapper, node.mapper.result
+        held = mapper.submaps.copy()  # one C-level copy: the matching stage adds meanwhile
+        robots = sorted({r for r, _ in held})
+        groups = mapper.frames.groups() if result is not None else []
+        grouped = {r for g in groups for r in g}
+        groups += [[r] for r in robots if r not in grouped]  # arrived since the optimisation
         shown: set[tuple[str, int]] = set()
-        if result is not None:
-            for group in mapper.frames.groups():
-                shown |= self._group(mapper, result, group)
+        for group in groups:
+            shown |= self._group(mapper, result if group[0] in grouped else None, group, held)
         stats = node.transport.stats().get("received", {})
-        keys = list(mapper.submaps.copy())
-        for robot in sorted({r for r, _ in keys}):
-            held = sum(1 for r, _ in keys if r == robot)
+        for robot in robots:
             got = sum(k.get("payload_bytes", 0) for k in stats.get(robot, {}).values())
-            rec.log(f"links/submaps_held/{robot}", rr.Scalars(held))
+            rec.log(f"links/submaps_held/{robot}", rr.Scalars(sum(r == robot for r, _ in held)))
             rec.log(f"links/bytes_received/{robot}", rr.Scalars(got))
+        now = time.time()
+        for key in shown - self.shown:
+            self.first_shown.setdefault(key, now)
         self.shown = shown
         self.updates += 1
 
-    def _group(self, mapper, result, group: list[str]) -> set[tuple[str, int]]:
-        rr, rec = self._rr, self.rec
-        base = f"groups/{mapper.frames.reference(group)}"
-        poses = {k: P for k, P in result.poses.items() if k[0] in group}
-        everything = mapper.submaps.copy()  # one C-level copy: the matching stage adds meanwhile
-        held = {k: s for k, s in everything.items() if k in poses}
-        for robot in group:
-            mine = sorted(k for k in held if k[0] == robot)
-            if not mine:
+    def _poses(self, mapper, result, group: list[str], held: dict) -> dict:
+        """Each held submap of ``group`` in its reference frame: optimised, or, for one that
+        arrived since, its odometry anchor moved by its robot's frame (shown at once)."""
+        poses = {}
+        for k, s in held.items():
+            if k[0] not in group:
                 continue
+            optimised = None if result is None else result.poses.get(k)
+            if optimised is None:
+                to_ref = np.eye(4) if result is None else mapper.frames.to_reference(k[0])
+                optimised = np.asarray(to_ref) @ s.anchor
+            poses[k] = optimised
+        return poses
+
+    def _group(self, mapper, result, group: list[str], held: dict) -> set[tuple[str, int]]:
+        rr, rec = self._rr, self.rec
+        base = f"groups/{group[0] if result is None else mapper.frames.reference(group)}"
+        poses = self._poses(mapper, result, group, held)
+        for robot in group:
+            if self._placed.get(robot, base) != base:  # it joined another group: move it
+                rec.log(f"{self._placed[robot]}/robots/{robot}", rr.Clear(recursive=True))
+                rec.log(f"{self._placed[robot]}/matches", rr.Clear(recursive=True))
+            self._placed[robot] = base
+            mine = sorted(k for k in poses if k[0] == robot)
             colour = (np.array(robot_color(robot)) * 255).astype(np.uint8)
             centres, half, quats = _ellipsoids([held[k].gmm.transform(poses[k]) for k in mine])
             quaternions = [rr.Quaternion(xyzw=q) for q in quats]
@@ -106,12 +129,12 @@ class LiveView:
                 f"{base}/robots/{robot}/anchors", rr.Points3D(anchors, colors=colour, radii=0.05)
             )
             rec.log(f"{base}/robots/{robot}/trajectory", rr.LineStrips3D([anchors], colors=colour))
-        kept = [result.edges[i] for i in result.accepted]
+        kept = [] if result is None else [result.edges[i] for i in result.accepted]
         segments = [
             [poses[a][:3, 3], poses[b][:3, 3]] for a, b in kept if a in poses and b in poses
         ]
         rec.log(f"{base}/matches", rr.LineStrips3D(segments, colors=[255, 255, 255]))
-        return set(held)
+        return set(poses)
 
 
 def _layout():
