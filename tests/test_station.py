@@ -82,6 +82,10 @@ def test_a_station_that_joins_late_holds_every_submap_and_sends_nothing(fleet):
         assert wait(lambda: station.report()["held"] == {"a": 2, "b": 2, "station": 0}, 30)
         assert wait(lambda: station.groups() == [["a", "b"]], 30)
         assert station.transport.stats()["totals"].get("sent", {}).get("messages", 0) == 0
+        assert wait(lambda: set(station.links) == {"a", "b"}, 15)  # the robots' byte counts
+        counts = station.link_counts()
+        assert sum(counts["a"]["sent"].values()) > 0 and counts["b"]["received"]["a"] > 0
+        assert set(counts["station"]["received"]) == {"a", "b"}
         assert a.transport.peers() == ["b"] and b.transport.peers() == ["a"]  # not counted
         station.transport.publish("submap", 0, b"\x00" * 64)  # a put of its own
         time.sleep(1.0)
@@ -159,3 +163,13 @@ def test_the_browser_shows_the_merged_map(fleet, tmp_path):
         near = np.linalg.norm(middle - colour, axis=1) < 60
         assert near.mean() > 0.002, (robot, near.mean())
     assert (tmp_path / "station.rrd").stat().st_size > 1000  # the same recording, saved
+
+
+def test_byte_counts_that_are_not_such_a_message_are_dropped():
+    from gmmap.fleet import linkstats
+
+    good = linkstats.encode({"sent": {"a": {"submap": {"payload_bytes": 5}}}}, "a")
+    assert linkstats.decode(good) == {"robot": "a", "sent": {"a": 5}, "received": {}}
+    for bad in (b"", b"[]", b'{"sent": 1, "received": {}}', b'{"sent": {"a": "x"}, "received": {}}',
+                b"\xff", b"{" * 20_000):  # fmt: skip
+        assert linkstats.decode(bad) is None

@@ -43,7 +43,7 @@ from pathlib import Path
 
 from gmmap.config import Config
 from gmmap.errors import DecodeError
-from gmmap.fleet import holdings
+from gmmap.fleet import holdings, linkstats
 from gmmap.fleet.arrivals import Arrivals
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
@@ -155,7 +155,7 @@ class RobotNode:
             self._spawn(name, target)
 
     def _serve(self) -> None:
-        self.transport.serve(self.store.fetch_provider, self.store.robots, self.budget)
+        self.transport.serve(linkstats.provider(self), self.store.robots, self.budget)
 
     def _spawn(self, name: str, target: Callable[..., None], *args: object) -> threading.Thread:
         th = threading.Thread(

@@ -15,11 +15,16 @@ subscribe and query, nothing else (`gmmap.fleet.access`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 
 from gmmap.config import Config
+from gmmap.errors import DecodeError
+from gmmap.fleet import linkstats
+from gmmap.fleet.codec import decode
 from gmmap.fleet.robot import KIND, RobotNode
+from gmmap.mapping.submap import Submap
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +40,8 @@ class StationNode(RobotNode):
         super().__init__(config)
         self.sweep_s = sweep_s
         self._wake = threading.Event()
+        self.links: dict[str, dict] = {}  # robot → its byte counts, as it last told them
+        self.arrived: dict[tuple[str, int], Submap] = {}  # decoded on arrival, for the view
 
     def start(self) -> None:
         super().start()
@@ -43,6 +50,14 @@ class StationNode(RobotNode):
     def stop(self) -> None:
         self._wake.set()
         super().stop()
+
+    def _enqueue(self, item) -> None:
+        # Shown at once (`arrived`), not only once the matching stage, which can lag behind a
+        # large fleet by tens of seconds, has taken it.
+        if item.origin != "own" and (item.robot, item.seq) not in self.arrived:
+            with contextlib.suppress(DecodeError):
+                self.arrived[(item.robot, item.seq)] = decode(self.door.inner(item.payload))
+        super()._enqueue(item)
 
     def _serve(self) -> None:  # answers no fetch
         pass
@@ -76,7 +91,21 @@ class StationNode(RobotNode):
         for robot in sorted(known - {self.robot}):
             since = self.arrivals.since(robot, self.store.seqs(robot))
             fetched += self._take(robot, t.fetch(robot, KIND, since, relay=robot not in peers))
+        for robot in sorted(peers):
+            self._count(robot, t.fetch(robot, linkstats.KIND, 0))
         return fetched
+
+    def link_counts(self) -> dict[str, dict]:
+        """Robot → bytes sent and received per peer, as each last told; the station's own."""
+        own = linkstats.decode(linkstats.encode(self.transport.stats(), self.robot))
+        return {**self.links, self.robot: own}
+
+    def _count(self, robot: str, got: list[tuple[int, bytes]]) -> None:
+        for seq, payload in got[-1:]:
+            if self.door.admit(robot, linkstats.KIND, seq, payload):
+                told = linkstats.decode(self.door.inner(payload))
+                if told is not None and told.get("robot") == robot:
+                    self.links[robot] = told
 
     def _take(self, robot: str, got: list[tuple[int, bytes]]) -> int:
         before = self.counts["fetched"]

@@ -7,9 +7,10 @@ Each `update` logs, in the reference robot's map frame of each connected group (
 (``…/robots/<robot>/components``), at its optimised pose or, until the next optimisation places
 it, at its odometry pose (so it shows the moment it arrives; a robot not yet in any group is
 shown alone, in its own map frame); each robot's anchors and trajectory; the kept matches as
-segments between the two submaps' anchors. Beside them, as time series per robot, the submaps
-held and the bytes the station received from it (``links/…/<robot>``). The timeline is ``wall``
-(clock time): the view grows as the fleet maps.
+segments between the two submaps' anchors. Beside them, as time series: per robot the bytes it
+sent and, per link, received (``links/received/<robot>/from_<peer>``, as the robots tell the
+station: `gmmap.fleet.linkstats`; the station's own too), and the submaps held. The timeline is
+``wall`` (clock time): the view grows as the fleet maps.
 """
 
 from __future__ import annotations
@@ -75,7 +76,8 @@ class LiveView:
         rr, rec = self._rr, self.rec
         rec.set_time("wall", timestamp=time.time())
         mapper, result = node.mapper, node.mapper.result
-        held = mapper.submaps.copy()  # one C-level copy: the matching stage adds meanwhile
+        # One C-level copy each (the stages add meanwhile); a station's arrivals too.
+        held = {**getattr(node, "arrived", {}).copy(), **mapper.submaps.copy()}
         robots = sorted({r for r, _ in held})
         groups = mapper.frames.groups() if result is not None else []
         grouped = {r for g in groups for r in g}
@@ -83,16 +85,25 @@ class LiveView:
         shown: set[tuple[str, int]] = set()
         for group in groups:
             shown |= self._group(mapper, result if group[0] in grouped else None, group, held)
-        stats = node.transport.stats().get("received", {})
         for robot in robots:
-            got = sum(k.get("payload_bytes", 0) for k in stats.get(robot, {}).values())
             rec.log(f"links/submaps_held/{robot}", rr.Scalars(sum(r == robot for r, _ in held)))
-            rec.log(f"links/bytes_received/{robot}", rr.Scalars(got))
+        self._links(node)
         now = time.time()
         for key in shown - self.shown:
             self.first_shown.setdefault(key, now)
         self.shown = shown
         self.updates += 1
+
+    def _links(self, node) -> None:
+        """Bytes each robot sent, and received per link (from whom), as the robots last told
+        the station (`StationNode.link_counts`), and what the station itself received."""
+        rr, rec = self._rr, self.rec
+        counts_of = getattr(node, "link_counts", None)  # a StationNode's
+        for robot, counts in (counts_of() if counts_of else {}).items():
+            if robot != node.robot:
+                rec.log(f"links/sent/{robot}", rr.Scalars(sum(counts["sent"].values())))
+            for peer, n in counts["received"].items():
+                rec.log(f"links/received/{robot}/from_{peer}", rr.Scalars(n))
 
     def _poses(self, mapper, result, group: list[str], held: dict) -> dict:
         """Each held submap of ``group`` in its reference frame: optimised, or, for one that
@@ -142,7 +153,8 @@ def _layout():
     import rerun.blueprint as rrb
 
     series = [rrb.TimeSeriesView(origin=f"/links/{what}", name=name)
-              for what, name in (("bytes_received", "bytes received"),
+              for what, name in (("sent", "bytes sent, per robot"),
+                                 ("received", "bytes received, per link"),
                                  ("submaps_held", "submaps held"))]  # fmt: skip
     map_view = rrb.Spatial3DView(origin="/groups", name="merged map")
     return rrb.Blueprint(rrb.Horizontal(map_view, rrb.Vertical(*series), column_shares=[3, 1]),
