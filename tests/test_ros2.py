@@ -752,6 +752,12 @@ def test_liveliness_tokens_round_trip_mangled_names_default_depth_and_humble():
         "", "@ros2_lv/0", LISTENER.replace("@ros2_lv", "@ros2"), LISTENER.replace("/NN/", "/XX/"),
         LISTENER.replace("/0/0/", "/0/x/"), LISTENER + "/%chatter", TALKER.rsplit("/", 1)[0],
         TALKER.replace("RIHS01_df", "RIHS02_df"), TALKER.replace("/MP/", "/NN/"),
+        LISTENER.replace("/aac3", "/AAC3"), LISTENER.replace("/%/%/", "/%/%/1"),
+        LISTENER.replace("/%/%/", "//%/"), LISTENER.replace("/%/%/", "/%/robot1/"),
+        LISTENER.replace("/%/%/", "/%/%a b/"), TALKER.replace("%chatter", "chatter"),
+        TALKER.replace("%chatter", "%"), TALKER.replace("::,7:,:,:,,", "::,x:,:,:,,"),
+        TALKER.replace("::,7:,:,:,,", "::,7:,:,:"),
+        TALKER.replace("::,7:,:,:,,", "::,\u0667:,:,:,,"),  # an Arabic-Indic 7
     ],
 )  # fmt: skip
 def test_malformed_liveliness_tokens_are_refused(key):
@@ -761,6 +767,11 @@ def test_malformed_liveliness_tokens_are_refused(key):
 
 def test_a_token_needs_a_hex_zid_a_known_kind_a_ros_node_name_and_a_topic():
     for args in (("zz", 0, 0, "NN", "n"), ("ab", 0, 0, "QQ", "n"), ("ab", 0, 0, "NN", "1n"),
-                 ("ab", 0, 0, "MP", "n")):  # fmt: skip
+                 ("ab", 0, 0, "MP", "n"), ("ab", 0, 0, "NN", "a/b"), ("ab", -1, 0, "NN", "n"),
+                 ("ab", 0, 0, "MS", "n", "/s", ros2.STRING, -1)):  # fmt: skip
         with pytest.raises(RosMessageError):
             ros2.liveliness_token(*args)
+    with pytest.raises(RosMessageError):
+        ros2.liveliness_token("ab", 0, 0, "NN", "n", namespace="robot1")  # not absolute
+    key = ros2.liveliness_token("ab", 0, 0, "NN", "n", namespace="/robot1")
+    assert key.endswith("/%/%robot1/n") and ros2.parse_liveliness_token(key).namespace == "/robot1"

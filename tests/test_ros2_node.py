@@ -244,7 +244,11 @@ def test_rmw_zenoh_tools_see_the_node_its_subscriptions_and_publishers():
             bridge.close()
         assert {t.node for t in seen} == {"gmmap_robot_1_a"}
         assert {t.zid for t in seen} == {str(bridge.session.info.zid())}
-        assert len({t.entity_id for t in seen}) == 8
+        assert sorted(t.entity_id for t in seen) == list(range(8))  # one counter, from 0
+        node = [t for t in seen if t.kind == "NN"]
+        assert [(t.node_id, t.entity_id) for t in node] == [(0, 0)]  # .../0/0/NN/...
+        assert {t.node_id for t in seen} == {0} and {t.namespace for t in seen} == {"/"}
+        assert not seen[0].zid.startswith("0")  # Zenoh's spelling: no leading zeros
         by_kind = {k: {(t.topic, t.typename) for t in seen if t.kind == k} for k in ("MS", "MP")}
         assert by_kind["MS"] == {("/points", ros2.POINTCLOUD2), ("/tf", ros2.TF_MESSAGE),
                                  ("/tf_static", ros2.TF_MESSAGE)}  # fmt: skip

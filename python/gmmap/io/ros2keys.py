@@ -163,6 +163,11 @@ def parse_key(key: str, namespace: str = "") -> RosKey:
 #   @ros2_lv/<domain>/<zid>/<nid>/<id>/<NN|MP|MS|SS|SC>/<enclave>/<namespace>/<node>
 #            [/<topic>/<dds type>/<type hash>/<qos>]
 #
+# <zid> is the session id as Zenoh prints it (lowercase hex, no leading zeros): rmw_zenoh takes
+# zenoh-cpp's Id::to_string, zenoh-c's z_id_to_string, the same Rust Display as zenoh-python's
+# str(ZenohId). (rmw_zenoh before zenoh-cpp, 2024, printed each byte unpadded: not followed.)
+# <nid> and <id> count from 0 in one context; a node's token has its own id in both.
+#
 # Names have every '/' mangled into '%' ('/' alone: '%'). <qos> lists reliability, durability,
 # history and depth, deadline, lifespan and liveliness; a component equal to rmw_zenoh's default
 # (reliable, volatile, keep last, depth 42, infinite durations, automatic) is left empty.
@@ -170,6 +175,9 @@ def parse_key(key: str, namespace: str = "") -> RosKey:
 LIVELINESS_PREFIX = "@ros2_lv"
 ENTITIES = {"NN": "node", "MP": "publisher", "MS": "subscription", "SS": "service", "SC": "client"}
 DEFAULT_DEPTH = 42
+_ZID = re.compile(r"[0-9a-f]{1,32}")
+# The <qos> chunk as qos_to_keyexpr writes it (ASCII: '\d' takes other scripts' digits too).
+_QOS = re.compile(r"\d*:\d*:\d*,\d*:\d*,\d*:\d*,\d*:\d*,\d*,\d*", re.ASCII)
 
 
 class LivelinessToken(NamedTuple):
@@ -207,23 +215,25 @@ def liveliness_token(
     distro: str = "jazzy", namespace: str = "/",
 ) -> str:  # fmt: skip
     """The key of one entity's token: a node (``kind`` "NN") or, with ``topic`` and
-    ``typename``, a publisher ("MP") or subscription ("MS")."""
-    if kind not in ENTITIES or not re.fullmatch(r"[0-9a-f]+", zid or ""):
-        raise RosMessageError(f"liveliness token: kind in {sorted(ENTITIES)}, hex zid: {kind}")
-    _topic_chunks(f"/{node}", "node name")
+    ``typename``, a publisher ("MP") or subscription ("MS"). The key is parsed back before it is
+    returned, so a bad zid, id, name or depth is refused here, not by the ROS graph."""
+    if kind not in ENTITIES:
+        raise RosMessageError(f"liveliness token kind must be one of {sorted(ENTITIES)}: {kind!r}")
     head = f"{LIVELINESS_PREFIX}/{_domain(domain)}/{zid}/{node_id}/{entity_id}/{kind}"
     key = f"{head}/%/{_mangle(namespace)}/{node}"
-    if kind == "NN":
-        return key
-    if topic is None or typename is None:
-        raise RosMessageError(f"a {ENTITIES[kind]} token needs its topic and type")
-    name = "/" + _topic_chunks(topic)
-    hashed = type_hash(typename, distro)
-    return f"{key}/{_mangle(name)}/{dds_type_name(typename)}/{hashed}/{qos_chunk(depth)}"
+    if kind != "NN":
+        if topic is None or typename is None:
+            raise RosMessageError(f"a {ENTITIES[kind]} token needs its topic and type")
+        name, hashed = "/" + _topic_chunks(topic), type_hash(typename, distro)
+        key += f"/{_mangle(name)}/{dds_type_name(typename)}/{hashed}/{qos_chunk(depth)}"
+    parse_liveliness_token(key)
+    return key
 
 
 def parse_liveliness_token(key: str) -> LivelinessToken:
-    """The entity a token key names; `RosMessageError` if it is not one."""
+    """The entity a token key names; `RosMessageError` if it is not one. Stricter than
+    rmw_zenoh's parser (which refuses only missing or empty chunks): names must be ROS names,
+    and the zid, ids and QoS what rmw_zenoh writes, so a stray key is not taken for an entity."""
     parts = key.split("/") if isinstance(key, str) else []
     if len(parts) not in (9, 13) or parts[0] != LIVELINESS_PREFIX or parts[5] not in ENTITIES:
         raise RosMessageError(f"not an rmw_zenoh liveliness token: {key!r}")
@@ -231,14 +241,26 @@ def parse_liveliness_token(key: str) -> LivelinessToken:
         raise RosMessageError(f"liveliness token with a non-numeric id: {key!r}")
     if (len(parts) == 9) != (parts[5] == "NN"):
         raise RosMessageError(f"liveliness token of the wrong length for {parts[5]}: {key!r}")
+    if not (_ZID.fullmatch(parts[2]) and parts[6] and re.fullmatch(_TOKEN, parts[8])):
+        raise RosMessageError(f"liveliness token with a bad zid, enclave or node name: {key!r}")
     head = (int(parts[1]), parts[2], int(parts[3]), int(parts[4]), parts[5])
-    token = LivelinessToken(*head, _demangle(parts[7]), parts[8])
+    token = LivelinessToken(*head, _absolute(parts[7], key, root=True), parts[8])
     if len(parts) == 9:
         return token
     if not (_DDS_TYPE.fullmatch(parts[10]) and _HASH.fullmatch(parts[11])):
         raise RosMessageError(f"liveliness token with a bad type or hash: {key!r}")
-    return token._replace(topic=_demangle(parts[9]), typename=ros_type_name(parts[10]),
+    if not _QOS.fullmatch(parts[12]):
+        raise RosMessageError(f"liveliness token with a bad QoS chunk: {key!r}")
+    return token._replace(topic=_absolute(parts[9], key), typename=ros_type_name(parts[10]),
                           type_hash=parts[11], qos=parts[12])  # fmt: skip
+
+
+def _absolute(chunk: str, key: str, root: bool = False) -> str:
+    """A mangled chunk as the absolute ROS name it stands for ('/' itself only if ``root``)."""
+    name = _demangle(chunk)
+    if not ((root and name == "/") or (name.startswith("/") and _NAME.fullmatch(name))):
+        raise RosMessageError(f"liveliness token with {chunk!r}, not an absolute ROS name: {key!r}")
+    return name
 
 
 # ---------------------------------------------------------------------------------------------
