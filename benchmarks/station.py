@@ -1,5 +1,6 @@
-"""A base station watching the demo fleet: its CPU and memory for 3 and 8 robots, and how soon
-a submap shows in its view, beside a robot process of the same run.
+"""A base station watching the demo fleet: CPU, memory and view latency for 3 and 8 robots.
+
+Beside a robot process of the same run.
 
 Prints one JSON object. Per fleet size, ``gmmap demo --station`` (simulated robots as
 processes, the station as one more, its Rerun view served and recorded): the station's CPU
