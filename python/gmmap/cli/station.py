@@ -84,9 +84,10 @@ def watch(node, view, every: float, stop: threading.Event, end: float | None) ->
     last = None
     while not stop.is_set() and (end is None or time.monotonic() < end):
         view.update(node)
-        held = node.report()["held"]
-        now = (sum(held.values()), node.counts["optimised"])
+        held = list(node.mapper.submaps.copy())
+        now = (len(held), node.counts["optimised"])
         if now != last:
-            log(f"{node.robot}: {now[0]} submaps of {len(held) - 1} robots, groups {node.groups()}")
+            robots = len({r for r, _ in held})
+            log(f"{node.robot}: {now[0]} submaps of {robots} robots, groups {node.groups()}")
             last = now
         stop.wait(every)

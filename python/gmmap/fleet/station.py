@@ -6,11 +6,12 @@ count it, wait for it or tell it anything), advertises nothing and answers no fe
 every submap the robots publish, fetches what their adverts show it lacks, and catches up on its
 own: when a robot appears, and every ``sweep_s`` while any is present, it asks each robot it
 knows for what it lacks beyond what has arrived (the owner where present, its relays otherwise),
-and the present robots for those of robots it has not heard of (`Transport.fetch_unknown`).
-Those queries, and their answers, are the only bytes it adds to the fleet's links; a sweep that
-finds nothing costs one query per robot. Its matching, optimisation and merge are the robots'
-own. In a secured fleet its credentials carry the station role: Zenoh's access control lets it
-subscribe and query, nothing else (`gmmap.fleet.access`).
+and the present robots for those of robots it has not heard of (`Transport.fetch_unknown`). It
+also asks each present robot for its byte counts (`gmmap.fleet.linkstats`). Those queries, and
+their answers, are the only bytes it adds to the fleet's links; a sweep that finds nothing costs
+two small queries per robot. Its matching, optimisation and merge are the robots' own. In a
+secured fleet its credentials carry the station role: Zenoh's access control lets it subscribe
+and query, nothing else (`gmmap.fleet.access`).
 """
 
 from __future__ import annotations
