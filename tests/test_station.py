@@ -3,9 +3,13 @@ late and still holds every submap, sends nothing, holds no write permission in a
 fleet, and a real headless browser (Debian's Chromium) shows its map."""
 
 import base64
+import contextlib
 import json
+import os
 import shutil
 import subprocess
+import sys
+import threading
 import time
 import urllib.request
 
@@ -101,8 +105,10 @@ def _chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-def _screenshot(url: str, seconds: float, tmp_path) -> np.ndarray | None:
-    """The page at ``url`` in headless Chromium (software GL), after ``seconds``, as RGB."""
+@contextlib.contextmanager
+def browser(url: str, tmp_path):
+    """Headless Chromium (software GL) on ``url``; yields a function returning a screenshot
+    (RGB array), driven over the DevTools protocol."""
     websocket = pytest.importorskip("websocket", reason="pip install websocket-client")
     from PIL import Image
 
@@ -111,39 +117,48 @@ def _screenshot(url: str, seconds: float, tmp_path) -> np.ndarray | None:
             "--enable-unsafe-swiftshader", "--window-size=1280,800",
             f"--remote-debugging-port={port}", f"--user-data-dir={tmp_path / 'profile'}",
             url]  # fmt: skip
-    browser = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    targets: list = []
+
+    def listed() -> bool:
+        try:
+            targets[:] = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json"))
+        except OSError:
+            return False
+        return any(t["type"] == "page" for t in targets)
+
     try:
-        targets = []
-
-        def listed() -> bool:
-            nonlocal targets
-            try:
-                targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json"))
-            except OSError:
-                return False
-            return any(t["type"] == "page" for t in targets)
-
         assert wait(listed, 30), "Chromium did not start"
         page = next(t for t in targets if t["type"] == "page")
         ws = websocket.create_connection(page["webSocketDebuggerUrl"], suppress_origin=True)
-        time.sleep(seconds)
-        ws.send(json.dumps({"id": 1, "method": "Page.captureScreenshot"}))
-        while (reply := json.loads(ws.recv())).get("id") != 1:
-            pass
+
+        def shot() -> np.ndarray:
+            ws.send(json.dumps({"id": 1, "method": "Page.captureScreenshot"}))
+            while (reply := json.loads(ws.recv())).get("id") != 1:
+                pass
+            png = tmp_path / "view.png"
+            png.write_bytes(base64.b64decode(reply["result"]["data"]))
+            return np.asarray(Image.open(png).convert("RGB"))
+
+        yield shot
         ws.close()
-        png = tmp_path / "view.png"
-        png.write_bytes(base64.b64decode(reply["result"]["data"]))
-        return np.asarray(Image.open(png).convert("RGB"))
     finally:
-        browser.terminate()
-        browser.wait(timeout=20)
+        proc.terminate()
+        proc.wait(timeout=20)
+
+
+def coloured(shot: np.ndarray, robot: str) -> float:
+    """The share of the 3D view's pixels near ``robot``'s colour (its shaded ellipsoids)."""
+    from gmmap.io.ros2msgs import robot_color
+
+    middle = shot[60:740, 20:940].reshape(-1, 3).astype(int)
+    return float((np.linalg.norm(middle - np.array(robot_color(robot)) * 255, axis=1) < 60).mean())
 
 
 @pytest.mark.skipif(_chromium() is None, reason="Chromium is not installed (make station)")
 @pytest.mark.skipif(not viz.available(), reason="Rerun is not installed (the viz extra)")
 def test_the_browser_shows_the_merged_map(fleet, tmp_path):
     from gmmap.io.liveview import LiveView
-    from gmmap.io.ros2msgs import robot_color
 
     (_a, _b), config = fleet
     station = StationNode(config, sweep_s=1.0)
@@ -154,14 +169,13 @@ def test_the_browser_shows_the_merged_map(fleet, tmp_path):
         assert wait(lambda: station.groups() == [["a", "b"]], 30)
         every = {("a", 0), ("a", 1), ("b", 0), ("b", 1)}
         assert wait(lambda: view.update(station) or view.shown == every, 30)  # optimised
-        shot = _screenshot(view.url, 25, tmp_path)
+        with browser(view.url, tmp_path) as shot:
+            time.sleep(25)  # the viewer's wasm loads and compiles in software
+            image = shot()
     finally:
         station.stop()
-    middle = shot[60:740, 20:940].reshape(-1, 3).astype(int)  # the 3D view
-    for robot in ("a", "b"):  # each robot's ellipsoids, shaded: near its colour
-        colour = np.array(robot_color(robot)) * 255
-        near = np.linalg.norm(middle - colour, axis=1) < 60
-        assert near.mean() > 0.002, (robot, near.mean())
+    for robot in ("a", "b"):  # each robot's ellipsoids are on screen: not a blank canvas
+        assert coloured(image, robot) > 0.002, robot
     assert (tmp_path / "station.rrd").stat().st_size > 1000  # the same recording, saved
 
 
@@ -173,3 +187,35 @@ def test_byte_counts_that_are_not_such_a_message_are_dropped():
     for bad in (b"", b"[]", b'{"sent": 1, "received": {}}', b'{"sent": {"a": "x"}, "received": {}}',
                 b"\xff", b"{" * 20_000):  # fmt: skip
         assert linkstats.decode(bad) is None
+
+
+@pytest.mark.skipif(_chromium() is None, reason="Chromium is not installed (make station)")
+@pytest.mark.skipif(not viz.available(), reason="Rerun is not installed (the viz extra)")
+def test_the_demos_station_shows_the_map_in_a_browser_while_the_demo_runs(tmp_path):
+    port = free_port()
+    paced = tmp_path / "paced.yaml"  # frames at twice real time: the view has time to load
+    paced.write_text("sim: {pace: 2.0}\n")
+    cmd = [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--station",
+           str(port), "--out", str(tmp_path / "out"), "--config", str(paced), "--json"]  # fmt: skip
+    demo = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+    url = None
+    for line in demo.stderr:  # the station says where its view is
+        if "view at http" in line:
+            url = line.split("view at ", 1)[1].split()[0]
+            break
+    threading.Thread(target=demo.stderr.read, daemon=True).start()  # keep the pipe drained
+    assert url is not None and url.startswith(f"http://127.0.0.1:{port}/")
+    seen = []
+    with browser(url, tmp_path) as shot:
+        while demo.poll() is None and not seen:
+            time.sleep(3)
+            image = shot()
+            seen = [r for r in ("robot_0", "robot_1", "robot_2") if coloured(image, r) > 0.001]
+    out = demo.stdout.read()
+    demo.wait(timeout=300)
+    assert demo.returncode == 0
+    assert seen, "the view showed no robot's map while the demo ran"
+    report = json.loads(out)
+    held = report["station"]["held"]
+    assert sum(v for k, v in held.items() if k != "station") == report["submaps"]
