@@ -42,7 +42,8 @@ def frames_of(sensor: str, width: int, n: int) -> list:
     return [run[i] for i in range(min(n, len(run)))]
 
 
-def _cpu() -> float:
+def cpu_seconds() -> float:
+    """This process's CPU time so far (user + system, every thread)."""
     t = os.times()
     return t.user + t.system
 
@@ -76,12 +77,12 @@ def live_run(tmp: Path, frames: list, hz: float) -> dict:
             live.push_frame(f.stamp, f.points)
         live.close()
 
-    cpu, wall = _cpu(), time.monotonic()
+    cpu, wall = cpu_seconds(), time.monotonic()
     feeder = threading.Thread(target=driver)
     feeder.start()
     feeder.join()
     builder.join()
-    wall, cpu = time.monotonic() - wall, _cpu() - cpu
+    wall, cpu = time.monotonic() - wall, cpu_seconds() - cpu
     n.stop()
     c = live.counts
     return {
@@ -101,9 +102,9 @@ def live_run(tmp: Path, frames: list, hz: float) -> dict:
 def recorded_run(tmp: Path, frames: list) -> dict:
     n = node(tmp, "recorded")
     n.start()
-    cpu, wall = _cpu(), time.monotonic()
+    cpu, wall = cpu_seconds(), time.monotonic()
     n.start_frames(frames).join()
-    wall, cpu = time.monotonic() - wall, _cpu() - cpu
+    wall, cpu = time.monotonic() - wall, cpu_seconds() - cpu
     built = n.counts["built"]
     n.stop()
     return {"frames": len(frames), "frames_per_s": len(frames) / wall,

@@ -38,6 +38,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+from live import cpu_seconds, node  # benchmarks/live.py: this script's folder is on the path
 
 from gmmap.config import Config
 from gmmap.fleet.robot import RobotNode
@@ -56,17 +57,6 @@ from gmmap.options import RosOptions
 TUM = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "tum_fr1_xyz"
 STRIDE = 4  # the depth pixels kept, both ways (RosOptions.depth_stride's default)
 MOUNT = make_poses(np.array([[0.1, 0.0, 0.3]]), np.array([[0.0, 0.0, 0.7071068, 0.7071068]]))[0]
-
-
-def _cpu() -> float:
-    t = os.times()
-    return t.user + t.system
-
-
-def node(tmp: Path, name: str) -> RobotNode:
-    config = Config()
-    config = replace(config, robot=replace(config.robot, name=name, store=str(tmp / f"{name}.db")))
-    return RobotNode(config)
 
 
 def submap_bytes(n: RobotNode) -> int:
@@ -131,7 +121,7 @@ def ros_run(tmp: Path, bag: Path, options: RosOptions, env: dict, others: set) -
     n.start()
     builder = n.start_frames(live)
     time.sleep(2.0)  # the master connects the bag's publishers to the node's subscribers
-    cpu, wall = _cpu(), time.monotonic()
+    cpu, wall = cpu_seconds(), time.monotonic()
     player = subprocess.Popen(["rosbag", "play", "-q", "-d", "1", str(bag)], env=env,
                               stdout=subprocess.DEVNULL, preexec_fn=_pin(others))  # fmt: skip
     player.wait(timeout=600)
@@ -139,7 +129,7 @@ def ros_run(tmp: Path, bag: Path, options: RosOptions, env: dict, others: set) -
     ending.set()
     live.close()
     builder.join()
-    wall, cpu = time.monotonic() - wall, _cpu() - cpu
+    wall, cpu = time.monotonic() - wall, cpu_seconds() - cpu
     bridge.close()
     c = live.counts
     out = {
@@ -158,9 +148,9 @@ def ros_run(tmp: Path, bag: Path, options: RosOptions, env: dict, others: set) -
 def recorded_run(tmp: Path, frames: list) -> dict:
     n = node(tmp, "recorded")
     n.start()
-    cpu = _cpu()
+    cpu = cpu_seconds()
     n.start_frames(frames).join()
-    cpu = _cpu() - cpu
+    cpu = cpu_seconds() - cpu
     out = {"frames": len(frames), "cpu_s_per_frame": cpu / len(frames),
            "submaps": n.counts["built"], "submap_bytes": submap_bytes(n)}  # fmt: skip
     n.stop()
