@@ -219,3 +219,17 @@ def test_the_demos_station_shows_the_map_in_a_browser_while_the_demo_runs(tmp_pa
     report = json.loads(out)
     held = report["station"]["held"]
     assert sum(v for k, v in held.items() if k != "station") == report["submaps"]
+
+
+@pytest.mark.skipif(not viz.available(), reason="Rerun is not installed (the viz extra)")
+def test_a_view_port_in_use_is_a_clear_error():
+    import socket
+
+    from gmmap.errors import GmmapError
+    from gmmap.io.liveview import LiveView
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        with pytest.raises(GmmapError, match=r"--grpc-port .* is not free"):
+            LiveView("x", grpc_port=taken.getsockname()[1], web_port=None)

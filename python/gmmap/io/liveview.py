@@ -15,6 +15,7 @@ station: `gmmap.fleet.linkstats`; the station's own too), and the submaps held. 
 
 from __future__ import annotations
 
+import socket
 import time
 from pathlib import Path
 from urllib.parse import quote
@@ -55,6 +56,8 @@ class LiveView:
             raise GmmapError("Rerun is not installed: pip install 'gmmap[viz]' (rerun-sdk)")
         import rerun as rr
 
+        for port, what in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
+            _check_free(host, port, what)
         self._rr = rr
         self.rec = rr.RecordingStream(f"gmmap-station-{name}")
         server = rr.GrpcServerSink(bind_ip=host, port=grpc_port)
@@ -146,6 +149,18 @@ class LiveView:
         ]
         rec.log(f"{base}/matches", rr.LineStrips3D(segments, colors=[255, 255, 255]))
         return set(poses)
+
+
+def _check_free(host: str, port: int | None, what: str) -> None:
+    """Rerun's servers fail on a port in use only in their log: say so here, typed."""
+    if not port:
+        return
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a server would
+        try:
+            probe.bind((host, port))
+        except OSError as err:
+            raise GmmapError(f"{what} {port} on {host} is not free: {err.strerror}") from err
 
 
 def _layout():
