@@ -233,3 +233,11 @@ def test_a_view_port_in_use_is_a_clear_error():
         taken.listen()
         with pytest.raises(GmmapError, match=r"--grpc-port .* is not free"):
             LiveView("x", grpc_port=taken.getsockname()[1], web_port=None)
+
+
+def test_a_station_refuses_a_robots_credentials(tmp_path):
+    from gmmap.fleet.credentials import CredentialsError
+
+    members = issue_fleet(tmp_path / "fleet", "f", ["a"])
+    with pytest.raises(CredentialsError, match="role station"):
+        StationNode(config(tmp_path, "a", free_port(), (), members["a"], "tls"))

@@ -19,11 +19,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from pathlib import Path
 
 from gmmap.config import Config
 from gmmap.errors import DecodeError
 from gmmap.fleet import linkstats
+from gmmap.fleet.access import STATION
 from gmmap.fleet.codec import decode
+from gmmap.fleet.credentials import CredentialsError, load
 from gmmap.fleet.robot import KIND, RobotNode
 from gmmap.mapping.submap import Submap
 
@@ -38,6 +41,12 @@ class StationNode(RobotNode):
     watch = True
 
     def __init__(self, config: Config, sweep_s: float = SWEEP_S) -> None:
+        folder = config.security.credentials
+        if folder is not None and (role := load(Path(folder)).role) != STATION:
+            raise CredentialsError(
+                f"{folder} is a {role}'s folder: the fleet's access control would let the station "
+                "publish; issue one with gmmap fleet add DIR NAME --role station"
+            )
         super().__init__(config)
         self.sweep_s = sweep_s
         self._wake = threading.Event()
