@@ -148,3 +148,16 @@ def test_evaluation_rejects_bad_points(g):
         g.pdf([[0.0, np.nan, 0.0]])
     with pytest.raises(InvalidInputError, match="shape"):
         g.score(np.zeros((4, 2)))
+
+
+def test_ellipsoids_rebuild_each_covariance_from_a_proper_rotation():
+    from gmmap.math.geometry import make_poses
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(5, 3, 3))
+    covs = A @ A.transpose(0, 2, 1) + 0.01 * np.eye(3)
+    g = Gmm(np.full(5, 0.2), rng.normal(size=(5, 3)), covs)
+    quats, half = g.ellipsoids(sigma=2.0)
+    R = make_poses(np.zeros((5, 3)), quats)[:, :3, :3]
+    assert np.allclose(np.linalg.det(R), 1.0)
+    assert np.allclose(R @ (np.eye(3) * (half / 2.0)[:, None, :] ** 2) @ R.transpose(0, 2, 1), covs)

@@ -21,23 +21,12 @@ from pathlib import Path
 from urllib.parse import quote
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gmmap.errors import GmmapError
 from gmmap.io import viz
 from gmmap.io.ros2msgs import robot_color
 
 SIGMAS = 2.0
-
-
-def _ellipsoids(gmms: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centres, half sizes and quaternions (x, y, z, w) of the components of ``gmms``."""
-    means = np.concatenate([g.means for g in gmms])
-    covariances = np.concatenate([g.covariances for g in gmms])
-    eigval, eigvec = np.linalg.eigh(covariances)
-    eigvec[np.linalg.det(eigvec) < 0, :, 0] *= -1  # a rotation, not a reflection
-    half = SIGMAS * np.sqrt(np.maximum(eigval, 0))
-    return means, half, Rotation.from_matrix(eigvec).as_quat()
 
 
 class LiveView:
@@ -133,11 +122,9 @@ class LiveView:
             self._placed[robot] = base
             mine = sorted(k for k in poses if k[0] == robot)
             colour = (np.array(robot_color(robot)) * 255).astype(np.uint8)
-            centres, half, quats = _ellipsoids([held[k].gmm.transform(poses[k]) for k in mine])
-            quaternions = [rr.Quaternion(xyzw=q) for q in quats]
-            rec.log(f"{base}/robots/{robot}/components", rr.Ellipsoids3D(
-                centers=centres, half_sizes=half, quaternions=quaternions, colors=colour,
-                fill_mode="solid"))  # fmt: skip
+            placed = [held[k].gmm.transform(poses[k]) for k in mine]
+            ellipsoids = viz.ellipsoids3d(placed, SIGMAS, colors=colour, fill_mode="solid")
+            rec.log(f"{base}/robots/{robot}/components", ellipsoids)
             anchors = np.array([poses[k][:3, 3] for k in mine])
             rec.log(
                 f"{base}/robots/{robot}/anchors", rr.Points3D(anchors, colors=colour, radii=0.05)

@@ -318,11 +318,8 @@ def robot_color(robot: str) -> tuple[float, float, float]:
 def ellipsoids(gmm: Gmm, sigma: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """(K, 4) orientations (qx qy qz qw) and (K, 3) diameters of each component's ``sigma``
     ellipsoid: the covariance's eigenvectors (made a proper rotation) and 2·sigma·√eigenvalue."""
-    values, vectors = np.linalg.eigh(gmm.covariances)
-    flip = np.linalg.det(vectors) < 0  # eigh may return a reflection; a quaternion cannot
-    vectors[flip, :, 2] *= -1
-    diameters = 2.0 * sigma * np.sqrt(np.clip(values, 0.0, None))
-    return matrix_to_quaternion(vectors), np.maximum(diameters, MIN_MARKER_SCALE)
+    quaternions, half_sizes = gmm.ellipsoids(sigma)
+    return quaternions, np.maximum(2.0 * half_sizes, MIN_MARKER_SCALE)
 
 
 def encode_markers(

@@ -12,7 +12,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gmmap.errors import GmmapError
 from gmmap.mapping.globalmap import GlobalMap
@@ -38,18 +37,7 @@ def save_rerun(
     rec.log("map", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     points = gmap.sample(n_points)
     rec.log("map/points", rr.Points3D(points, colors=_height_colours(points[:, 2])), static=True)
-    eigval, eigvec = np.linalg.eigh(gmap.gmm.covariances)
-    eigvec[np.linalg.det(eigvec) < 0, :, 0] *= -1  # a rotation, not a reflection
-    quaternions = Rotation.from_matrix(eigvec).as_quat()  # x, y, z, w
-    rec.log(
-        "map/components",
-        rr.Ellipsoids3D(
-            centers=gmap.gmm.means,
-            half_sizes=sigmas * np.sqrt(np.maximum(eigval, 0)),
-            quaternions=[rr.Quaternion(xyzw=q) for q in quaternions],
-        ),
-        static=True,
-    )
+    rec.log("map/components", ellipsoids3d([gmap.gmm], sigmas), static=True)
     for robot, trajectory in gmap.trajectories.items():
         rec.log(
             f"map/trajectories/{robot}",
@@ -58,6 +46,17 @@ def save_rerun(
         )
     rec.flush()
     return path
+
+
+def ellipsoids3d(gmms: list, sigmas: float = 2.0, **style):
+    """The components of ``gmms`` as one Rerun Ellipsoids3D, each its ``sigmas`` ellipsoid."""
+    import rerun as rr
+
+    axes = [g.ellipsoids(sigmas) for g in gmms]
+    quaternions = [rr.Quaternion(xyzw=q) for quats, _ in axes for q in quats]
+    half_sizes = np.concatenate([h for _, h in axes])
+    centres = np.concatenate([g.means for g in gmms])
+    return rr.Ellipsoids3D(centers=centres, half_sizes=half_sizes, quaternions=quaternions, **style)
 
 
 def _height_colours(z: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ import numpy as np
 from gmmap import _core
 from gmmap.errors import FileFormatError, InvalidGmmError, InvalidInputError
 from gmmap.math.fileio import load_npz, save_npz
+from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.math.points import as_points
 
 FILE_FORMAT = "gmmap GMM"
@@ -123,6 +124,14 @@ class Gmm:
         covs = np.einsum("ij,kjl,ml->kim", R, self.covariances, R)
         covs = 0.5 * (covs + covs.transpose(0, 2, 1))  # exact symmetry despite rounding
         return Gmm(self.weights, self.means @ R.T + t, covs)
+
+    def ellipsoids(self, sigma: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 4) orientations (qx qy qz qw) and (K, 3) half sizes of each component's
+        ``sigma`` ellipsoid: the covariance's eigenvectors (made a proper rotation, which a
+        quaternion needs and eigh need not return) and sigma·√eigenvalue."""
+        values, vectors = np.linalg.eigh(self.covariances)
+        vectors[np.linalg.det(vectors) < 0, :, 2] *= -1
+        return matrix_to_quaternion(vectors), sigma * np.sqrt(np.clip(values, 0.0, None))
 
     def coarsened(self, cell: float) -> Gmm:
         """Components whose means share a ``cell``-sized voxel merged into one with the same
