@@ -21,12 +21,17 @@ def _bytes(by_kind: dict) -> int:
     return int(sum(k.get("payload_bytes", 0) + k.get("key_bytes", 0) for k in by_kind.values()))
 
 
-def encode(stats: dict, robot: str) -> bytes:
-    """The JSON a robot tells: bytes sent (its own and relayed, by whose) and received, by
-    robot, from its transport's ``stats()``."""
+def counts(stats: dict, robot: str) -> dict:
+    """What a robot tells: bytes sent (its own and relayed, by whose) and received, by robot,
+    from its transport's ``stats()``."""
     told = {d: {r: _bytes(k) for r, k in sorted(stats.get(d, {}).items())}
             for d in ("sent", "received")}  # fmt: skip
-    return json.dumps({"robot": robot, **told}, separators=(",", ":")).encode()
+    return {"robot": robot, **told}
+
+
+def encode(stats: dict, robot: str) -> bytes:
+    """`counts` as the JSON a robot answers with."""
+    return json.dumps(counts(stats, robot), separators=(",", ":")).encode()
 
 
 def decode(payload: bytes) -> dict | None:

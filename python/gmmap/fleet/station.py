@@ -107,8 +107,7 @@ class StationNode(RobotNode):
 
     def link_counts(self) -> dict[str, dict]:
         """Robot → bytes sent and received per peer, as each last told; the station's own."""
-        own = linkstats.decode(linkstats.encode(self.transport.stats(), self.robot))
-        return {**self.links, self.robot: own}
+        return {**self.links, self.robot: linkstats.counts(self.transport.stats(), self.robot)}
 
     def _count(self, robot: str, got: list[tuple[int, bytes]]) -> None:
         for seq, payload in got[-1:]:

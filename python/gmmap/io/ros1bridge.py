@@ -21,16 +21,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from gmmap.errors import FileFormatError, InvalidInputError
+from gmmap.io import ros2msgs
 from gmmap.io.datasets.rosbag import decode_pointcloud2
 from gmmap.io.ros2bridge import MAP_POINTS, Bridge, tf_tree
-from gmmap.io.ros2msgs import (
-    Camera,
-    camera_of,
-    depth_points,
-    ellipsoids,
-    pose_matrix,
-    robot_color,
-)
+from gmmap.io.ros2msgs import camera_of, depth_points, ellipsoids, pose_matrix, robot_color
 from gmmap.mapping.live import LiveInput
 from gmmap.math.geometry import matrix_to_quaternion
 from gmmap.options import RosOptions
@@ -81,22 +75,11 @@ class Ros1Bridge(Bridge):
         ros.init_node(f"gmmap_{robot}", anonymous=False, disable_signals=True)
         self._ros = ros
         o = options
-        self._camera: Camera | None = None
-
-        def sub(topic: str, kind, handle):
-            return ros.Subscriber(topic, kind, self._safe(handle))
-
-        if o.depth_topic is not None:
-            info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
-            self._subs = [sub(info, CameraInfo, self._camera_info),
-                          sub(o.depth_topic, Image, self._depth)]  # fmt: skip
-        else:
-            self._subs = [sub(o.cloud_topic or "/points", PointCloud2, self._cloud)]
-        if o.tf_parent is not None:
-            self._subs += [sub("/tf", TFMessage, self._tf),
-                           sub("/tf_static", TFMessage, self._tf_static)]  # fmt: skip
-        else:
-            self._subs.append(sub(o.odom_topic or "/odom", Odometry, self._odom))
+        kinds = {ros2msgs.CAMERA_INFO: CameraInfo, ros2msgs.IMAGE: Image,
+                 ros2msgs.POINTCLOUD2: PointCloud2, ros2msgs.ODOMETRY: Odometry,
+                 ros2msgs.TF_MESSAGE: TFMessage}  # fmt: skip
+        self._subs = [ros.Subscriber(topic, kinds[kind], self._safe(handle))
+                      for topic, kind, handle in self._inputs()]  # fmt: skip
         self._pubs = {
             "map": ros.Publisher(o.map_topic, MarkerArray, queue_size=1, latch=True),
             "points": ros.Publisher(o.points_topic, PointCloud2, queue_size=1, latch=True),
@@ -124,9 +107,7 @@ class Ros1Bridge(Bridge):
         self._camera = camera_of(msg, msg.K)
 
     def _depth(self, msg) -> None:
-        if self._camera is None:  # no intrinsics yet: nothing to back-project with
-            raise InvalidInputError("a depth image before its CameraInfo")
-        points = depth_points(msg, self._camera, self.options.depth_stride)
+        points = depth_points(msg, self._intrinsics(), self.options.depth_stride)
         self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, points)
 
     def _odom(self, msg) -> None:
@@ -139,9 +120,6 @@ class Ros1Bridge(Bridge):
             parent, child, r = t.header.frame_id, t.child_frame_id, t.transform
             pose = pose_matrix(r.translation, r.rotation, f"tf {parent}->{child}")
             self._transform(parent, child, t.header.stamp.to_sec(), pose, static)
-
-    def _tf_static(self, msg) -> None:
-        self._tf(msg, static=True)
 
     def publish(self, node) -> None:
         """The merged map, the TF tree and the status, once."""

@@ -30,6 +30,7 @@ import os
 import re
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -62,6 +63,7 @@ class Bridge:
         # Poses from /tf: the chain down to ros.tf_child, or to the clouds' frame once known.
         o = options
         self.tf = None if o.tf_parent is None else TfChain(o.tf_parent, o.tf_child)
+        self._camera: ros2.Camera | None = None  # from CameraInfo, for depth images
         self._stop = threading.Event()
 
     def _frame(self, stamp: float, frame_id: str, points: np.ndarray) -> None:
@@ -74,6 +76,29 @@ class Bridge:
     def _pose(self, stamp: float, pose: np.ndarray) -> None:
         self.live.push_pose(stamp, pose)
         self.counts["poses"] += 1
+
+    def _inputs(self) -> list[tuple[str, str, Callable]]:
+        """(topic, ROS 2 type name, handler) of every subscription the settings ask for: depth
+        images with their CameraInfo or clouds, and /tf with /tf_static or odometry."""
+        o = self.options
+        if o.depth_topic is not None:
+            info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
+            frames = [(info, ros2.CAMERA_INFO, self._camera_info),
+                      (o.depth_topic, ros2.IMAGE, self._depth)]  # fmt: skip
+        else:
+            frames = [(o.cloud_topic or "/points", ros2.POINTCLOUD2, self._cloud)]
+        if o.tf_parent is not None:
+            return [*frames, ("/tf", ros2.TF_MESSAGE, self._tf),
+                    ("/tf_static", ros2.TF_MESSAGE, self._tf_static)]  # fmt: skip
+        return [*frames, (o.odom_topic or "/odom", ros2.ODOMETRY, self._odom)]
+
+    def _intrinsics(self) -> ros2.Camera:
+        if self._camera is None:  # no intrinsics yet: nothing to back-project with
+            raise InvalidInputError("a depth image before its CameraInfo")
+        return self._camera
+
+    def _tf_static(self, msg) -> None:
+        self._tf(msg, static=True)
 
     def _poses(self, poses: list[tuple[float, np.ndarray]]) -> None:
         for stamp, pose in poses:
@@ -131,20 +156,7 @@ class Ros2Bridge(Bridge):
         self.node_name = "gmmap_" + re.sub(r"[^A-Za-z0-9_]", "_", robot)  # a ROS name token
         self._tokens: list = []
         self._declare("NN")
-        o = options
-        self._camera: ros2.Camera | None = None
-        if o.depth_topic is not None:
-            info = o.camera_info_topic or f"{o.depth_topic.rsplit('/', 1)[0]}/camera_info"
-            self._subs = [self._subscribe(info, ros2.CAMERA_INFO, self._camera_info),
-                          self._subscribe(o.depth_topic, ros2.IMAGE, self._depth)]  # fmt: skip
-        else:
-            cloud = o.cloud_topic or "/points"
-            self._subs = [self._subscribe(cloud, ros2.POINTCLOUD2, self._cloud)]
-        if o.tf_parent is not None:
-            self._subs.append(self._subscribe("/tf", ros2.TF_MESSAGE, self._tf))
-            self._subs.append(self._subscribe("/tf_static", ros2.TF_MESSAGE, self._tf_static))
-        else:
-            self._subs.append(self._subscribe(o.odom_topic or "/odom", ros2.ODOMETRY, self._odom))
+        self._subs = [self._subscribe(*plan) for plan in self._inputs()]
         for topic, typename, depth in self.outputs():
             self._declare("MP", topic, typename, depth)
 
@@ -202,10 +214,8 @@ class Ros2Bridge(Bridge):
         self._camera = ros2.decode_camera_info(data, self.options.distro)
 
     def _depth(self, data: bytes) -> None:
-        if self._camera is None:  # no intrinsics yet: nothing to back-project with
-            raise InvalidInputError("a depth image before its CameraInfo")
         o = self.options
-        self._push(ros2.decode_depth_image(data, self._camera, o.depth_stride, o.distro))
+        self._push(ros2.decode_depth_image(data, self._intrinsics(), o.depth_stride, o.distro))
 
     def _odom(self, data: bytes) -> None:
         p = ros2.decode_odometry(data, self.options.distro)
@@ -214,9 +224,6 @@ class Ros2Bridge(Bridge):
     def _tf(self, data: bytes, static: bool = False) -> None:
         for p in ros2.decode_tf(data, self.options.distro):
             self._transform(p.parent, p.child, p.stamp, p.pose, static)
-
-    def _tf_static(self, data: bytes) -> None:
-        self._tf(data, static=True)
 
     # ---- out --------------------------------------------------------------------------------
 
