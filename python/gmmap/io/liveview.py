@@ -2,8 +2,9 @@
 the SDK (Rerun's web viewer, connected to a gRPC server in this process) and saved to an .rrd
 that ``rerun station.rrd`` replays.
 
-Each `update` logs, in the reference robot's map frame of each connected group (z up, under
-``groups/<reference>``): every held submap's components as 2-sigma ellipsoids, coloured by robot
+Each `update` logs what changed since the last (new submaps, a new optimisation), in the
+reference robot's map frame of each connected group (z up, under ``groups/<reference>``): every
+held submap's components as 2-sigma ellipsoids, coloured by robot
 (``…/robots/<robot>/components``), at its optimised pose or, until the next optimisation places
 it, at its odometry pose (so it shows the moment it arrives; a robot not yet in any group is
 shown alone, in its own map frame); each robot's anchors and trajectory; the kept matches as
@@ -62,6 +63,9 @@ class LiveView:
         self.shown: set[tuple[str, int]] = set()  # the submaps the last update showed
         self.first_shown: dict[tuple[str, int], float] = {}  # clock time each first showed
         self._placed: dict[str, str] = {}  # robot → the group path it was last logged under
+        # What was last logged, by robot (its submaps) and by group path (its matches), with
+        # the backend result it came from: only what changed is logged again.
+        self._logged: dict[str, tuple] = {}
 
     def update(self, node) -> None:
         """Logs ``node``'s state now (a `RobotNode` or `StationNode`)."""
@@ -119,8 +123,11 @@ class LiveView:
             if self._placed.get(robot, base) != base:  # it joined another group: move it
                 rec.log(f"{self._placed[robot]}/robots/{robot}", rr.Clear(recursive=True))
                 rec.log(f"{self._placed[robot]}/matches", rr.Clear(recursive=True))
+                self._logged.pop(self._placed[robot], None)
             self._placed[robot] = base
             mine = sorted(k for k in poses if k[0] == robot)
+            if not self._changed(robot, result, (base, mine)):
+                continue
             colour = (np.array(robot_color(robot)) * 255).astype(np.uint8)
             placed = [held[k].gmm.transform(poses[k]) for k in mine]
             ellipsoids = viz.ellipsoids3d(placed, SIGMAS, colors=colour, fill_mode="solid")
@@ -130,12 +137,22 @@ class LiveView:
                 f"{base}/robots/{robot}/anchors", rr.Points3D(anchors, colors=colour, radii=0.05)
             )
             rec.log(f"{base}/robots/{robot}/trajectory", rr.LineStrips3D([anchors], colors=colour))
-        kept = [] if result is None else [result.edges[i] for i in result.accepted]
-        segments = [
-            [poses[a][:3, 3], poses[b][:3, 3]] for a, b in kept if a in poses and b in poses
-        ]
-        rec.log(f"{base}/matches", rr.LineStrips3D(segments, colors=[255, 255, 255]))
+        if self._changed(base, result, sorted(poses)):
+            kept = [] if result is None else [result.edges[i] for i in result.accepted]
+            segments = [
+                [poses[a][:3, 3], poses[b][:3, 3]] for a, b in kept if a in poses and b in poses
+            ]
+            rec.log(f"{base}/matches", rr.LineStrips3D(segments, colors=[255, 255, 255]))
         return set(poses)
+
+    def _changed(self, what: str, result, state) -> bool:
+        """Whether ``what`` (a robot, a group path) differs from its last logging: another
+        backend result (a new optimisation) or another ``state``; noted as logged now."""
+        last = self._logged.get(what)
+        if last is not None and last[0] is result and last[1] == state:
+            return False
+        self._logged[what] = (result, state)
+        return True
 
 
 def _check_free(host: str, port: int | None, what: str) -> None:
