@@ -30,10 +30,13 @@ from gmmap.fleet.transport import free_port
 
 def one(robots: int, max_frames: int | None) -> dict:
     base = Config()
-    config = backend_follows_drift(replace(base, sim=replace(base.sim, robots=robots)))
+    ports = {"web_port": free_port(), "grpc_port": free_port()}
+    config = replace(base, sim=replace(base.sim, robots=robots),
+                     station=replace(base.station, **ports))  # fmt: skip
+    config = backend_follows_drift(config)
     with tempfile.TemporaryDirectory() as tmp:
         say = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
-        r = run_demo(config, max_frames, Path(tmp), say, station=free_port())
+        r = run_demo(config, max_frames, Path(tmp), say, station=True)
         reports = [json.loads((Path(tmp) / f"robot_{i}.json").read_text()) for i in range(robots)]
     station = r["station"]
     mine = [x["resources"] for x in reports if x.get("resources")]

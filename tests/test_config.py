@@ -9,6 +9,7 @@ from click.testing import CliRunner
 from conftest import BUNDLED_TUM_SLICE
 from gmmap.cli import main
 from gmmap.config import Config, ConfigError, load_config
+from gmmap.errors import InvalidInputError
 from gmmap.options import BuildOptions, PlaceOptions
 
 
@@ -25,7 +26,7 @@ def test_the_cli_dump_is_the_defaults(tmp_path):
     tree = yaml.safe_load(result.stdout)
     assert list(tree) == [
         "build", "select", "register", "place", "backend", "transport", "link", "robot",
-        "security", "ros", "planner", "sim",
+        "security", "station", "ros", "planner", "sim",
     ]  # fmt: skip
     assert Config.from_dict(tree) == Config()
 
@@ -87,3 +88,13 @@ def test_override_rejects_unknown_keys():
     with pytest.raises(ConfigError, match="no setting"):
         Config().override({"build.nosuch": 1})
     assert Config().override({"build.n_components": None}) == Config()
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [{"sweep_s": 0}, {"every_s": -1.0}, {"grpc_port": 0}, {"web_port": 70000},
+     {"web_port": True}, {"name": "a/b"}],
+)  # fmt: skip
+def test_a_wrong_station_setting_is_refused(bad):
+    with pytest.raises(InvalidInputError, match="station"):
+        Config.from_dict({"station": bad})

@@ -194,9 +194,11 @@ def test_byte_counts_that_are_not_such_a_message_are_dropped():
 def test_the_demos_station_shows_the_map_in_a_browser_while_the_demo_runs(tmp_path):
     port = free_port()
     paced = tmp_path / "paced.yaml"  # frames at twice real time: the view has time to load
-    paced.write_text("sim: {pace: 2.0}\n")
+    paced.write_text(
+        f"sim: {{pace: 2.0}}\nstation: {{web_port: {port}, grpc_port: {free_port()}}}\n"
+    )
     cmd = [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--station",
-           str(port), "--out", str(tmp_path / "out"), "--config", str(paced), "--json"]  # fmt: skip
+           "--out", str(tmp_path / "out"), "--config", str(paced), "--json"]  # fmt: skip
     demo = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
     url = None

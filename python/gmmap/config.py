@@ -33,6 +33,7 @@ from gmmap.options import (
     SecurityOptions,
     SelectOptions,
     SimOptions,
+    StationOptions,
     TransportOptions,
 )
 
@@ -54,6 +55,7 @@ class Config:
     link: LinkOptions = field(default_factory=LinkOptions)
     robot: RobotOptions = field(default_factory=RobotOptions)
     security: SecurityOptions = field(default_factory=SecurityOptions)
+    station: StationOptions = field(default_factory=StationOptions)
     ros: RosOptions = field(default_factory=RosOptions)
     planner: PlannerOptions = field(default_factory=PlannerOptions)
     sim: SimOptions = field(default_factory=SimOptions)

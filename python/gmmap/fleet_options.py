@@ -190,3 +190,29 @@ class SecurityOptions:
             raise InvalidInputError(f"security.rate must be > 0 messages/s or null: {self.rate}")
         if isinstance(self.burst, bool) or not isinstance(self.burst, int) or self.burst < 1:
             raise InvalidInputError(f"security.burst must be an integer >= 1, got {self.burst}")
+
+
+@dataclass(frozen=True)
+class StationOptions:
+    """A base station (``gmmap station``, `gmmap.fleet.station`): its ``name`` in the fleet,
+    its catch-up round every ``sweep_s`` seconds, its live view (`gmmap.io.liveview`) updated
+    every ``every_s`` seconds and served on ``host``: the data (Rerun gRPC) on ``grpc_port``,
+    Rerun's web viewer on ``web_port`` (0: not served)."""
+
+    name: str = "station"
+    sweep_s: float = 5.0
+    every_s: float = 1.0
+    host: str = "127.0.0.1"
+    grpc_port: int = 9876
+    web_port: int = 9090
+
+    def __post_init__(self) -> None:
+        check_name("station.name", self.name, InvalidInputError)
+        if not (self.sweep_s > 0 and self.every_s > 0):
+            raise InvalidInputError("station.sweep_s and station.every_s must be > 0 seconds")
+        for key in ("grpc_port", "web_port"):
+            port = getattr(self, key)
+            if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+                raise InvalidInputError(f"station.{key} must be a port 0..65535, got {port!r}")
+        if self.grpc_port == 0:
+            raise InvalidInputError("station.grpc_port must be a port, not 0")

@@ -15,7 +15,13 @@ from typing import Any
 import numpy as np
 
 from gmmap.errors import InvalidInputError
-from gmmap.fleet_options import LinkOptions, RobotOptions, SecurityOptions, TransportOptions
+from gmmap.fleet_options import (
+    LinkOptions,
+    RobotOptions,
+    SecurityOptions,
+    StationOptions,
+    TransportOptions,
+)
 
 __all__ = [
     "BackendOptions",
@@ -29,6 +35,7 @@ __all__ = [
     "SecurityOptions",
     "SelectOptions",
     "SimOptions",
+    "StationOptions",
     "TransportOptions",
     "drift_overrides",
 ]

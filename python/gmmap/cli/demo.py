@@ -52,15 +52,15 @@ def run_demo(
     log=print,
     crash: tuple[int, int] | None = None,
     secure: bool = False,
-    station: int | None = None,
+    station: bool = False,
 ) -> dict:
     """Runs ``config.sim.robots`` robot processes, each started with its own configuration
     file (this tree with its name, store and endpoints), and summarises their reports.
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
     and started again on its store. ``secure``: a new fleet authority and credentials for each
     robot in ``out/fleet``, TLS links, access control and sealed submaps
-    (`gmmap.fleet.access`). ``station``: a ``gmmap station`` beside them, its view served on
-    that port (`station_command`)."""
+    (`gmmap.fleet.access`). ``station``: a ``gmmap station`` beside them, on the tree's station
+    section (`station_command`)."""
     # The robots run in this interpreter: a missing fleet extra is named here, not in n logs.
     import zenoh  # noqa: F401
 
@@ -114,8 +114,8 @@ def run_demo(
             crasher = threading.Thread(target=_crash, args=args)
             crasher.start()
     watcher = None
-    if station is not None:
-        cmd = station_command(config, fleet, ports, out, station, members.get("station"))
+    if station:
+        cmd = station_command(config, fleet, ports, out, members.get("station"))
         watcher = _launch(cmd, log, readers)
     if crash:
         crasher.join()
@@ -207,15 +207,14 @@ def station_summary(out: Path, reports: dict[str, dict]) -> dict:
 
 
 def station_command(
-    config: Config, fleet: str, ports: list[int], out: Path, web_port: int, credentials=None
+    config: Config, fleet: str, ports: list[int], out: Path, credentials=None
 ) -> list[str]:
-    """``gmmap station`` watching the demo's robots (straight to their endpoints), its view
-    served on ``web_port`` and saved to out/station.rrd, its report out/station.json."""
-    from gmmap.fleet.transport import free_port
-
+    """``gmmap station`` on the demo's tree (out/config.yaml: its station section, the robots'
+    mapping settings) watching the demo's robots straight at their endpoints, its view saved
+    to out/station.rrd, its report out/station.json."""
     scheme = "tcp" if credentials is None else "tls"
     cmd = [sys.executable, "-c", "from gmmap.cli import main; main()", "station",
-           "--fleet", fleet, "--web-port", str(web_port), "--grpc-port", str(free_port()),
+           "--config", str(config.save(out / "station.yaml")), "--fleet", fleet,
            "--save", str(out / "station.rrd"), "--report", str(out / "station.json")]  # fmt: skip
     for port in ports[: config.sim.robots]:
         cmd += ["--peer", f"{scheme}/127.0.0.1:{port}"]
@@ -438,11 +437,8 @@ def format_report(r: dict) -> str:
 )
 @click.option(
     "--station",
-    "station_port",
-    type=int,
-    is_flag=False,
-    flag_value=9090,
-    help="Watch the robots from a gmmap station, its view served on this port (default 9090).",
+    is_flag=True,
+    help="Watch the robots from a gmmap station, its view in the browser (the station section).",
 )
 @click.option(
     "--secure",
@@ -455,7 +451,7 @@ def command(
     max_frames: int | None,
     out: Path | None,
     plots: Path | None,
-    station_port: int | None,
+    station: bool,
     secure: bool,
     config: Config,
     as_json: bool,
@@ -465,7 +461,7 @@ def command(
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
     config = backend_follows_drift(config)
-    r = run_demo(config, max_frames, out, log, secure=secure, station=station_port)
+    r = run_demo(config, max_frames, out, log, secure=secure, station=station)
     if plots:
         from gmmap.eval.fleetplots import write_plots
 

@@ -18,31 +18,25 @@ from gmmap.config import Config
 
 @click.command("station")
 @setting("--fleet", "robot.fleet", "The fleet to watch.")
-@click.option("--id", "name", default="station", show_default=True, help="The station's name.")
+@setting("--id", "station.name", "The station's name in the fleet.")
 @setting("--peer", "transport.connect", "Zenoh endpoint of a robot.", multiple=True)
 @setting("--port", "transport.port", "Loopback listen port (0: free).", type=int)
 @setting("--listen", "transport.listen", "Zenoh listen endpoint.", multiple=True)
 @setting("--credentials", "security.credentials", "The station's folder (gmmap fleet add "
          "--role station): TLS, and Zenoh lets it subscribe and query only.")  # fmt: skip
-@click.option("--web-port", type=int, default=9090, show_default=True,
-              help="Where the Rerun web viewer is served (0: not served).")  # fmt: skip
-@click.option("--grpc-port", type=int, default=9876, show_default=True,
-              help="Where the view data is served (Rerun gRPC).")  # fmt: skip
-@click.option("--host", default="127.0.0.1", show_default=True, help="Address to serve on.")
+@setting("--web-port", "station.web_port", "Where Rerun's web viewer is served (0: not).",
+         type=int)  # fmt: skip
+@setting("--grpc-port", "station.grpc_port", "Where the view data is served (Rerun gRPC).",
+         type=int)  # fmt: skip
+@setting("--host", "station.host", "Address to serve the view on.")
+@setting("--every", "station.every_s", "Seconds between view updates.", type=float)
 @click.option("--save", type=click.Path(dir_okay=False, path_type=Path),
               help="Also record the view to this .rrd (replay: rerun FILE).")  # fmt: skip
-@click.option("--every", type=float, default=1.0, show_default=True,
-              help="Seconds between view updates.")  # fmt: skip
 @click.option("--duration", type=float, help="Stop after this many seconds (default: Ctrl-C).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path))
 @config_option
 def command(
-    name: str,
-    web_port: int,
-    grpc_port: int,
-    host: str,
     save: Path | None,
-    every: float,
     duration: float | None,
     report_path: Path | None,
     config: Config,
@@ -54,21 +48,20 @@ def command(
     from gmmap.fleet.station import StationNode
     from gmmap.io.liveview import LiveView
 
-    if every <= 0:
-        raise click.BadParameter("must be > 0", param_hint="--every")
-    config = replace(config, robot=replace(config.robot, name=name))
-    view = LiveView(name, grpc_port, web_port or None, save, host)
+    o = config.station
+    config = replace(config, robot=replace(config.robot, name=o.name))
+    view = LiveView(o.name, o.grpc_port, o.web_port or None, save, o.host)
     node = StationNode(config)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     node.start()
     secured = "secured" if config.security.credentials else "plain TCP"
-    log(f"{name}: watching fleet {config.robot.fleet} ({secured}); view at {view.url or '-'}"
+    log(f"{o.name}: watching fleet {config.robot.fleet} ({secured}); view at {view.url or '-'}"
         f" (data: {view.data_url})")  # fmt: skip
     end = None if duration is None else time.monotonic() + duration
     try:
-        watch(node, view, every, stop, end)
+        watch(node, view, o.every_s, stop, end)
     finally:
         report = node.report()
         node.stop()

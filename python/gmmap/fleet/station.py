@@ -4,7 +4,7 @@ sends nothing of its own, so the robots' links and budgets carry what they would
 A `StationNode` is a `RobotNode` without frames that holds no liveliness token (its peers do not
 count it, wait for it or tell it anything), advertises nothing and answers no fetch. It takes
 every submap the robots publish, fetches what their adverts show it lacks, and catches up on its
-own: when a robot appears, and every ``sweep_s`` while any is present, it asks each robot it
+own: when a robot appears, and every ``station.sweep_s`` while any is present, it asks each robot it
 knows for what it lacks beyond what has arrived (the owner where present, its relays otherwise),
 and the present robots for those of robots it has not heard of (`Transport.fetch_unknown`). It
 also asks each present robot for its byte counts (`gmmap.fleet.linkstats`). Those queries, and
@@ -32,15 +32,13 @@ from gmmap.mapping.submap import Submap
 
 log = logging.getLogger(__name__)
 
-SWEEP_S = 5.0
-
 
 class StationNode(RobotNode):
     """Watches ``config.robot.fleet`` under the name ``config.robot.name``."""
 
     watch = True
 
-    def __init__(self, config: Config, sweep_s: float = SWEEP_S) -> None:
+    def __init__(self, config: Config, sweep_s: float | None = None) -> None:
         folder = config.security.credentials
         if folder is not None and (role := load(Path(folder)).role) != STATION:
             raise CredentialsError(
@@ -48,7 +46,7 @@ class StationNode(RobotNode):
                 "publish; issue one with gmmap fleet add DIR NAME --role station"
             )
         super().__init__(config)
-        self.sweep_s = sweep_s
+        self.sweep_s = config.station.sweep_s if sweep_s is None else sweep_s
         self._wake = threading.Event()
         self.links: dict[str, dict] = {}  # robot → its byte counts, as it last told them
         self.arrived: dict[tuple[str, int], Submap] = {}  # decoded on arrival, for the view
