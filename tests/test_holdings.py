@@ -1,7 +1,5 @@
 """Adverts of what each robot holds (`gmmap.fleet.holdings`)."""
 
-import json
-
 from gmmap.fleet.holdings import (
     FINAL,
     LINGER,
@@ -18,28 +16,28 @@ from gmmap.fleet.holdings import (
 def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
     counts = {"robot_1": 7, "robot_0": 9}
     for state in (MAPPING, LINGER, FINAL):
-        assert decode(encode(counts, state, ["b", "a"])) == Advert(counts, state, ("a", "b"))
-    assert encode(counts) == b'{"held":{"robot_0":9,"robot_1":7},"state":"mapping","reach":[]}'
-
-    def advert(held, state="mapping", reach=()):
-        return json.dumps({"held": held, "state": state, "reach": list(reach)}).encode()
-
+        for reach in ([], ["robot_1"], ["b", "a"], ["robot_0", "zed"]):
+            got = decode(encode(counts, state, reach))
+            assert got == Advert(counts, state, tuple(sorted(reach)))
+    # state, 2 robots, each its name and count, 1 heard: robot_1 by index
+    assert encode(counts, LINGER, ["robot_1"]) == (
+        b"\x01\x02\x07robot_0\x09\x07robot_1\x07\x01\x01"
+    )
+    assert len(encode({f"robot_{i}": 40 for i in range(5)}, LINGER, ["robot_1"])) == 49
+    good = encode(counts, LINGER, ["zed"])
     for bad in (
-        b"not json",
-        b"\xff\xfe",
-        b"[1, 2]",
-        json.dumps(counts).encode(),  # no envelope
-        advert(counts, state=1),
-        advert(counts, state="asleep"),
-        json.dumps({"held": counts, "final": False}).encode(),
-        advert(counts, reach=["bad name!"]),
-        advert(counts, reach=[3]),
-        advert({"robot_0": -1}),
-        advert({"robot_0": 1.5}),
-        advert({"robot_0": True}),
-        advert({"bad name!": 1}),
-        advert({f"r{i}": 1 for i in range(2000)}),
-        b" " * (MAX_BYTES + 1),
+        b"",
+        b"not an advert",
+        b"\x03" + good[1:],  # no such state
+        good[:-1],  # truncated
+        good + b"\x00",  # trailing bytes
+        b"\x00\x02\x07robot_0\x01\x07robot_0\x02\x00",  # a robot named twice
+        b"\x00\x01\x09bad name!\x01\x00",
+        b"\x00\x01\x02\xff\xfe\x01\x00",  # not UTF-8
+        b"\x00\x01\x01a\x01\x01\x05",  # a heard index past the names
+        b"\x00\x01\x01a" + b"\xff" * 10 + b"\x01\x00",  # a count past 64 bits
+        b"\x00\xff\x7f",  # more robots than allowed
+        b"\x00" * (MAX_BYTES + 1),
     ):
         assert decode(bad) is None, bad
     h = Holdings()

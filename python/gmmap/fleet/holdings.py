@@ -1,9 +1,12 @@
 """What each robot holds, told to its peers, so that a robot ends only once the peers in reach
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
-An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``; its payload is compact JSON,
-``{"held":{"robot_0":9,"robot_1":7},"state":"mapping","reach":["robot_1"]}``: how many
-submaps of each robot the sender holds, and the robots it hears directly. Counts, not sets: a
+An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``: how many submaps of each robot
+the sender holds, its state, and the robots it hears directly. Its payload is binary, a few
+bytes per robot (`encode`): a byte for the state (0 mapping, 1 linger, 2 final), a varint
+count of robots, per robot in name order its name (varint length, UTF-8) and count (varint),
+then a varint count of the robots heard, each a varint: the index of a name above, or the
+number of names above followed by a name not among them. Counts, not sets: a
 robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
 gap is still being filled, which the next advert shows. The state is ``mapping`` while the
 sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
@@ -14,24 +17,26 @@ ignored, never trusted.
 
 from __future__ import annotations
 
-import json
 import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from gmmap.errors import DecodeError
+from gmmap.fleet.bitstream import _Reader, _Writer
 from gmmap.names import NAME_RE
 
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
 # the robot lingers, whenever it changes (`Holdings.is_news`) and then rests for SETTLE_S, at
 # most once per SETTLE_S (`advert_due`), and every ADVERT_EVERY_S in case one was lost. Each
-# advert costs about 100 B of payload and two packets per peer.
+# advert costs about 10 B of payload per robot it names and two packets per peer.
 SETTLE_S = 1.0
 ADVERT_EVERY_S = 30.0
 FETCH_EVERY_S = 5.0  # at most this often a catch-up fetch, while a peer holds more
 PROGRESS_EVERY_S = 5.0
 MAX_BYTES = 65_536
 MAX_ROBOTS = 1_024
+MAX_COUNT = 2**62
 
 
 MAPPING, LINGER, FINAL = STATES = ("mapping", "linger", "final")
@@ -49,29 +54,54 @@ class Advert:
 def encode(counts: Mapping[str, int], state: str = MAPPING, reach: Iterable[str] = ()) -> bytes:
     if state not in STATES:
         raise ValueError(f"an advert's state is one of {STATES}, not {state!r}")
-    advert = {"held": dict(sorted(counts.items())), "state": state, "reach": sorted(reach)}
-    return json.dumps(advert, separators=(",", ":")).encode()
+    w = _Writer()
+    w.u8(STATES.index(state))
+    names = sorted(counts)
+    w.uvarint(len(names))
+    for name in names:
+        _name(w, name)
+        w.uvarint(counts[name])
+    index = {name: i for i, name in enumerate(names)}
+    heard = sorted(reach)
+    w.uvarint(len(heard))
+    for name in heard:
+        w.uvarint(index.get(name, len(names)))
+        if name not in index:
+            _name(w, name)
+    return bytes(w.buf)
+
+
+def _name(w: _Writer, name: str) -> None:
+    raw = name.encode()
+    w.uvarint(len(raw))
+    w.raw(raw)
+
+
+def _read_name(r: _Reader) -> str:
+    name = r.take(r.uvarint("name length", 255), "name").decode()
+    if not NAME_RE.fullmatch(name):
+        raise DecodeError(f"{name!r} is not a robot name")
+    return name
 
 
 def decode(payload: bytes) -> Advert | None:
     """The advert in ``payload``, or None when it is not one."""
     if len(payload) > MAX_BYTES:
         return None
+    r = _Reader(payload)
     try:
-        advert = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
-        return None
-    if not isinstance(advert, dict) or set(advert) != {"held", "state", "reach"}:
-        return None
-    counts, state, reach = advert["held"], advert["state"], advert["reach"]
-    if not isinstance(counts, dict) or not isinstance(reach, list) or state not in STATES:
-        return None
-    if max(len(counts), len(reach)) > MAX_ROBOTS:
-        return None
-    for name, n in counts.items():
-        if not NAME_RE.fullmatch(name) or type(n) is not int or n < 0:
-            return None
-    if not all(isinstance(name, str) and NAME_RE.fullmatch(name) for name in reach):
+        state = STATES[r.uvarint("state", len(STATES) - 1)]
+        names, counts = [], {}
+        for _ in range(r.uvarint("robots", MAX_ROBOTS)):
+            names.append(_read_name(r))
+            counts[names[-1]] = r.uvarint("count", MAX_COUNT)
+        reach = []
+        for _ in range(r.uvarint("robots heard", MAX_ROBOTS)):
+            i = r.uvarint("robot heard", len(names))
+            reach.append(names[i] if i < len(names) else _read_name(r))
+        if r.pos != len(payload) or len(counts) != len(names):
+            return None  # trailing bytes, or a robot named twice
+    except (DecodeError, UnicodeDecodeError):
         return None
     return Advert(counts, state, tuple(reach))
 
