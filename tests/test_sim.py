@@ -114,6 +114,24 @@ def test_builtin_worlds_are_drivable(name):
         assert world.clearance([world.start[:2], world.goal]).min() > 0.3
 
 
+@pytest.mark.parametrize("seed", [0, 7, 1000, 4242])
+def test_procedural_offices_are_drivable_and_shared(seed):
+    world = get_world(f"random-office:{seed}")
+    assert world.to_dict() == get_world(f"random-office:{seed}").to_dict()
+    assert world.to_dict() != get_world(f"random-office:{seed + 1}").to_dict()
+    run = simulate(world, len(world.routes), sensor=SMALL_CAMERA)
+    for robot in run:
+        assert world.clearance(robot.gt_poses[:, :2, 3]).min() > 0.3
+    for a, b in zip(run, run[1:], strict=False):  # robot i ends where robot i + 1 starts
+        pa, pb = a.gt_poses[:, :2, 3], b.gt_poses[:, :2, 3]
+        assert np.linalg.norm(pa[:, None] - pb[None], axis=2).min() < 0.3
+
+
+def test_a_procedural_office_needs_an_integer_seed():
+    with pytest.raises(InvalidInputError, match="integer"):
+        get_world("random-office:x")
+
+
 def test_world_file_round_trip_and_errors(tmp_path):
     world = get_world("clutter")
     world.save(tmp_path / "w.json")

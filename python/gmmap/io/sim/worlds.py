@@ -136,8 +136,18 @@ WORLDS = {
 
 
 def get_world(name: str) -> World:
-    """A built-in world by name."""
+    """A built-in world by name, or a procedural office, ``random-office:<seed>``
+    (`gmmap.io.sim.procedural`)."""
+    from gmmap.io.sim.procedural import PREFIX, random_office
+
+    if name.startswith(PREFIX):
+        try:
+            return random_office(int(name[len(PREFIX) :]))
+        except ValueError:
+            raise InvalidInputError(f"{name!r}: the seed after {PREFIX!r} is an integer") from None
     try:
         return WORLDS[name]()
     except KeyError:
-        raise InvalidInputError(f"unknown world {name!r}; built-in: {', '.join(WORLDS)}") from None
+        raise InvalidInputError(
+            f"unknown world {name!r}; built-in: {', '.join(WORLDS)}, or {PREFIX}<seed>"
+        ) from None
