@@ -1,3 +1,4 @@
+import itertools
 import json
 
 import numpy as np
@@ -122,7 +123,7 @@ def test_procedural_offices_are_drivable_and_shared(seed):
     run = simulate(world, len(world.routes), sensor=SMALL_CAMERA)
     for robot in run:
         assert world.clearance(robot.gt_poses[:, :2, 3]).min() > 0.3
-    for a, b in zip(run, run[1:], strict=False):  # robot i ends where robot i + 1 starts
+    for a, b in itertools.pairwise(run):  # robot i ends where robot i + 1 starts
         pa, pb = a.gt_poses[:, :2, 3], b.gt_poses[:, :2, 3]
         assert np.linalg.norm(pa[:, None] - pb[None], axis=2).min() < 0.3
 

@@ -153,6 +153,9 @@ class RegisterOptions:
             raise InvalidInputError("information_scale must be > 0 (or null)")
 
 
+DESCRIPTORS = ("shape", "learned")
+
+
 @dataclass(frozen=True)
 class PlaceOptions:
     """Place recognition and verification (`gmmap.mapping.place`). ``max_distance``: the paper's
@@ -179,8 +182,14 @@ class PlaceOptions:
     27° off, which moves 0.28 m.
     """
 
+    # "shape": the training-free D2 descriptor; "learned": PointNetVLAD
+    # (`gmmap.mapping.learned`), with ``weights`` (null: the ones shipped with gmmap).
+    descriptor: str = "shape"
+    weights: str | None = None
     top_k: int = 5
-    max_distance: float = 0.1
+    # The candidates' cosine distance limit; null: the descriptor's own (shape 0.1; learned:
+    # set by its training run).
+    max_distance: float | None = None
     min_confidence: float = 0.55
     # Reject when another basin scores this close to the best (alternative / confidence):
     # the geometry is ambiguous, e.g. a corridor seen end for end.
@@ -206,8 +215,13 @@ class PlaceOptions:
             raise InvalidInputError(
                 "top_k >= 1, resample_points >= 2, skip_recent and refine_neighbours >= 0"
             )
-        if not 0 <= self.min_confidence <= 1 or not 0 <= self.max_distance <= 2:
-            raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2]")
+        far = self.max_distance
+        if not 0 <= self.min_confidence <= 1 or not (far is None or 0 <= far <= 2):
+            raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2] or null")
+        if self.descriptor not in DESCRIPTORS:
+            raise InvalidInputError(
+                f"place.descriptor must be one of {', '.join(DESCRIPTORS)}, got {self.descriptor!r}"
+            )
         if not self.max_refine_shift > 0:
             raise InvalidInputError(f"max_refine_shift must be > 0, got {self.max_refine_shift}")
         if not 0 < self.max_ambiguity <= 1:
@@ -351,7 +365,7 @@ class SimOptions:
     field, however fast each maps (rendezvous links need it).
     """
 
-    world: str = "office"  # a built-in world or a world .json file
+    world: str = "office"  # a built-in world, random-office:<seed> or a world .json file
     robots: int = 3
     seed: int = 0  # sensor noise and odometry
     sensor: str = "lidar"

@@ -143,7 +143,9 @@ def ros_settings(fn: Callable) -> Callable:
 
 
 SIM_SETTINGS = (
-    setting("--world", "sim.world", "A built-in world or a world .json file."),
+    setting(
+        "--world", "sim.world", "A built-in world, random-office:<seed> or a world .json file."
+    ),
     setting("--robots", "sim.robots", "Simulated robots.", type=int),
     setting("--seed", "sim.seed", "Sensor noise and odometry seed.", type=int),
     setting(
@@ -181,6 +183,12 @@ BUDGET = setting(
     "robot.budget",
     "Bytes/s of payload the robot puts on each link, newest submaps first.",
     type=float,
+)
+DESCRIPTOR = setting(
+    "--descriptor",
+    "place.descriptor",
+    "Place descriptor: training-free shape, or learned PointNetVLAD.",
+    type=click.Choice(["shape", "learned"]),
 )
 MIN_CONFIDENCE = setting(
     "--min-confidence", "place.min_confidence", "C_thr of the verification.", type=float

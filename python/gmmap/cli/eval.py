@@ -9,6 +9,7 @@ import click
 
 from gmmap.cli.common import (
     COVARIANCE,
+    DESCRIPTOR,
     FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
     MIN_MATCHES,
@@ -176,6 +177,7 @@ def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> s
 @FRAMES_PER_SUBMAP
 @COVARIANCE
 @setting("--top-k", "place.top_k", "Candidates verified per query.", type=int)
+@DESCRIPTOR
 @click.option("--no-gicp", is_flag=True, help="Skip the points + GICP verification baseline.")
 @click.option(
     "--plots",

@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from gmmap.cli.common import (
+    DESCRIPTOR,
     MIN_CONFIDENCE,
     MIN_MATCHES,
     anchor_stamps,
@@ -31,6 +32,7 @@ from gmmap.config import Config
 )
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write maps here.")
 @setting("--top-k", "place.top_k", "Candidates verified per submap.", type=int)
+@DESCRIPTOR
 @MIN_CONFIDENCE
 @MIN_MATCHES
 @odometry_drift_option

@@ -28,7 +28,7 @@ import numpy as np
 
 from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import pose_errors
-from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor
+from gmmap.mapping.place import PlaceDatabase, PlaceOptions, descriptor_for
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
 from gmmap.math.geometry import invert
 
@@ -202,7 +202,7 @@ def evaluate_place(
     if len(queries) == 0:
         raise InvalidInputError("no submap overlaps another robot's: nothing to recognise")
     robots = np.array([s.robot for s in submaps])
-    db = PlaceDatabase(ShapeDescriptor(), options)
+    db = PlaceDatabase(descriptor_for(options), options)
     say = progress or (lambda _m: None)
     say(f"describing {len(submaps)} submaps")
     start = time.perf_counter()
@@ -212,7 +212,12 @@ def evaluate_place(
     sims = {"gmm": similarity(gmm_vectors, robots), "points": similarity(point_vectors, robots)}
     db_size = min(int((robots != robots[q]).sum()) for q in queries)
     top1pct = max(1, round(db_size / 100))
-    result: dict = {"queries": len(queries), "submaps": len(submaps), "robots": len(set(robots))}
+    result: dict = {
+        "descriptor": options.descriptor,
+        "queries": len(queries),
+        "submaps": len(submaps),
+        "robots": len(set(robots)),
+    }
     for name, sim in sims.items():
         curve = recall_curve(sim, pos, queries)
         top1 = sim[queries].max(axis=1)

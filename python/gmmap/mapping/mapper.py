@@ -30,7 +30,7 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
-from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
+from gmmap.mapping.place import Candidate, Match, PlaceDatabase, descriptor_for, distinct
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
 from gmmap.math.gmm import Gmm
@@ -46,7 +46,11 @@ class Mapper:
 
     def __init__(self, config: Config | None = None) -> None:
         self.config = config or Config()
-        self.db = PlaceDatabase(options=self.config.place, registration=self.config.register)
+        self.db = PlaceDatabase(
+            descriptor_for(self.config.place),
+            options=self.config.place,
+            registration=self.config.register,
+        )
         self.graph = PoseGraph(self.config.backend)
         self.submaps: dict[Node, Submap] = {}
         self.matches: list[Match] = []  # every pair judged here, accepted or not, in order

@@ -6,9 +6,11 @@ and a descriptor turns those points into a unit vector; candidates are the neare
 cosine distance, and each candidate is verified by registration, whose geometric confidence C
 decides (the paper's C_thr).
 
-A descriptor is anything with ``describe_points(points) -> vector`` (a learned one such as
-PointNetVLAD on 4,096 resampled points plugs in here) and, optionally,
-``yaw(source_points, target_points) -> radians`` to hint the registration. The default,
+A descriptor is anything with ``describe_points(points) -> vector``, optionally
+``max_distance`` (its candidates' cosine distance limit) and
+``yaw(source_points, target_points) -> radians`` to hint the registration;
+``place.descriptor`` picks one (`descriptor_for`): "learned" is the paper's PointNetVLAD on
+4,096 resampled points (`gmmap.mapping.learned`). The default, "shape",
 `ShapeDescriptor`, needs no training and no download: the D2 shape distribution (Osada et al.
 2002) split into horizontal distance and height difference. Both are invariant to a yaw and a
 translation of the submap, which is all that separates two robots' levelled anchor frames, and
@@ -79,6 +81,7 @@ class ShapeDescriptor:
     rings: int = 20
     sectors: int = 60
     seed: int = 0
+    max_distance: float = 0.1  # candidates' cosine distance limit (`PlaceOptions.max_distance`)
 
     def __post_init__(self) -> None:
         counts = (self.pairs, self.distance_bins, self.height_bins, self.rings, self.sectors)
@@ -126,6 +129,15 @@ class ShapeDescriptor:
         shift = int(np.argmax(corr.sum(axis=0)))
         yaw = shift * 2 * math.pi / self.sectors
         return (yaw + math.pi) % (2 * math.pi) - math.pi
+
+
+def descriptor_for(options: PlaceOptions) -> Descriptor:
+    """The descriptor ``options.descriptor`` names: "shape" or "learned" (its weights)."""
+    if options.descriptor == "learned":
+        from gmmap.mapping.learned import WEIGHTS, LearnedDescriptor
+
+        return LearnedDescriptor(options.weights or str(WEIGHTS))
+    return ShapeDescriptor()
 
 
 @dataclass(frozen=True)
@@ -199,6 +211,13 @@ class PlaceDatabase:
     def __len__(self) -> int:
         return len(self.keys)
 
+    @property
+    def max_distance(self) -> float:
+        """The candidates' cosine distance limit: the options', else the descriptor's."""
+        if self.options.max_distance is not None:
+            return self.options.max_distance
+        return float(getattr(self.descriptor, "max_distance", ShapeDescriptor.max_distance))
+
     def describe(self, gmm: Gmm) -> np.ndarray:
         points = resample(gmm, self.options.resample_points)
         return _unit(np.asarray(self.descriptor.describe_points(points), dtype=float))
@@ -250,7 +269,7 @@ class PlaceDatabase:
         k = min(k or self.options.top_k, len(distance))
         best = np.argpartition(distance, k - 1)[:k]
         best = best[np.argsort(distance[best], kind="stable")]
-        limit = self.options.max_distance
+        limit = self.max_distance
         return [Candidate(*self.keys[i], float(distance[i])) for i in best if distance[i] <= limit]
 
     def verify(self, robot: str, seq: int, gmm: Gmm, candidate: Candidate) -> Match:
