@@ -18,7 +18,7 @@ from gmmap.mapping.learned import (
     reference_cloud,
     save,
 )
-from gmmap.mapping.place import PlaceDatabase, descriptor_for
+from gmmap.mapping.place import PlaceDatabase, ShapeDescriptor, descriptor_for
 from gmmap.options import PlaceOptions
 
 
@@ -74,7 +74,7 @@ def test_the_shipped_weights_give_their_recorded_outputs(shipped):
     out = shipped.describe_points(reference_cloud(ref["seed"]))
     assert np.abs(out[: len(ref["output"])] - np.array(ref["output"])).max() < 1e-4
     assert WEIGHTS.stat().st_size <= 5_000_000
-    assert 0 < shipped.max_distance < 2
+    assert 0 < shipped.candidate_distance < 2
     assert meta["trained_by"] == "benchmarks/train_place.py"
     held_out = set(meta["recipe"]["held_out"])
     assert held_out and not held_out & set(meta["parts_used"])
@@ -105,8 +105,9 @@ def test_the_place_options_name_the_descriptor():
     with pytest.raises(InvalidInputError, match="descriptor"):
         PlaceOptions(descriptor="pointnet")
     db = PlaceDatabase(descriptor_for(PlaceOptions(descriptor="learned")))
-    assert db.max_distance == LearnedDescriptor().max_distance
+    assert db.max_distance == LearnedDescriptor().candidate_distance
     assert PlaceDatabase(options=PlaceOptions(max_distance=0.3)).max_distance == 0.3
+    assert PlaceDatabase().max_distance == 0.1 and ShapeDescriptor().max_distance == 8.0
 
 
 def test_a_robots_config_picks_the_learned_descriptor(tmp_path):

@@ -158,7 +158,7 @@ class LearnedDescriptor:
         return load(self.weights)
 
     @property
-    def max_distance(self) -> float:
+    def candidate_distance(self) -> float:
         """The cosine distance under which a candidate is kept, from the training run."""
         return float(self.model[2]["max_distance"])
 

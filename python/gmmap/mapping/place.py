@@ -7,7 +7,7 @@ cosine distance, and each candidate is verified by registration, whose geometric
 decides (the paper's C_thr).
 
 A descriptor is anything with ``describe_points(points) -> vector``, optionally
-``max_distance`` (its candidates' cosine distance limit) and
+``candidate_distance`` (its candidates' cosine distance limit) and
 ``yaw(source_points, target_points) -> radians`` to hint the registration;
 ``place.descriptor`` picks one (`descriptor_for`): "learned" is the paper's PointNetVLAD on
 4,096 resampled points (`gmmap.mapping.learned`). The default, "shape",
@@ -38,6 +38,7 @@ from gmmap.math.register import Registration, register
 from gmmap.options import PlaceOptions, RegisterOptions
 
 RESAMPLE_POINTS = PlaceOptions.resample_points
+SHAPE_CANDIDATE_DISTANCE = 0.1  # the shape descriptor's cosine distance limit
 
 
 def resample(gmm: Gmm, n: int = RESAMPLE_POINTS, seed: int = 0) -> np.ndarray:
@@ -81,7 +82,6 @@ class ShapeDescriptor:
     rings: int = 20
     sectors: int = 60
     seed: int = 0
-    max_distance: float = 0.1  # candidates' cosine distance limit (`PlaceOptions.max_distance`)
 
     def __post_init__(self) -> None:
         counts = (self.pairs, self.distance_bins, self.height_bins, self.rings, self.sectors)
@@ -216,7 +216,7 @@ class PlaceDatabase:
         """The candidates' cosine distance limit: the options', else the descriptor's."""
         if self.options.max_distance is not None:
             return self.options.max_distance
-        return float(getattr(self.descriptor, "max_distance", ShapeDescriptor.max_distance))
+        return float(getattr(self.descriptor, "candidate_distance", SHAPE_CANDIDATE_DISTANCE))
 
     def describe(self, gmm: Gmm) -> np.ndarray:
         points = resample(gmm, self.options.resample_points)
