@@ -61,10 +61,13 @@ DESCRIPTIONS: dict[str, str] = {
     "Baselines: GMM-merge and per-frame GMM submaps, and small_gicp's GICP on the same points "
     "and pairs.",
     "place": "The paper's Fig. 7/8: place-recognition recall@1 and recall@top-1 %, recall at "
-    "100 % precision after verification, and query time against 1,000 and 10,000 submaps. "
-    "Data: TUM fr1_xyz split into two robots, and the simulated office with 3 and 5 robots. "
-    "Baselines: the same descriptor on the raw submap points, and verification by points + "
-    "small_gicp's GICP.",
+    "100 % precision after verification, the time to describe a submap, and query time "
+    "against 1,000 and 10,000 submaps, for the training-free shape descriptor and the learned "
+    "PointNetVLAD. Data, none used in training: held-out simulated worlds pooled into one "
+    "database (procedural offices and the demo office, LiDAR and depth), TUM fr1_xyz split "
+    "into two robots, and the demo office with 3 and 5 robots. Baselines: each descriptor on "
+    "the raw submap points (the paper: PointNetVLAD 87.4 % on resampled GMMs against 88.3 % "
+    "on raw clouds), and verification by points + small_gicp's GICP.",
     "merge": "The offline merge (`gmmap merge`) against ground truth, on TUM fr1_xyz split "
     "into two robots and on the simulated office. Measured: each robot pair's relative pose "
     "where they met, their map frames, the kept matches, the ATE (evo) of all anchors, and "
