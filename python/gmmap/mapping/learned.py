@@ -153,6 +153,9 @@ class LearnedDescriptor:
 
     weights: str = str(WEIGHTS)
 
+    def __post_init__(self) -> None:
+        load(self.weights)  # a bad weights file fails here, not in a robot's matching thread
+
     @property
     def model(self) -> tuple[dict[str, np.ndarray], Architecture, dict]:
         return load(self.weights)
