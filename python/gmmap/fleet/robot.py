@@ -7,9 +7,13 @@ Stages, each a thread:
   works on what it sent: the decoded copy of its own submap, the same bytes every other robot
   sees, goes on to matching. Each built submap is also given to ``on_built`` (a `Built`
   event: status lines, evaluation outside the node).
-- **matching**: the transport's subscription (and fetch replies) → inbox (`Arrived` events) →
-  decode → store → `Mapper.add` (place recognition against the other robots' submaps held,
-  verification, a judged pair never registered again) → each judged pair stored as an edge.
+- **keeping**: the transport's subscription (and fetch replies) → inbox (`Arrived` events) →
+  decode → store, at once however far matching lags: what is stored is what the adverts
+  count and the fetches serve, so a robot in between hands on a submap while it still meets
+  the robot that lacks it.
+- **matching**: kept submaps → `Mapper.add` (place recognition against the other robots'
+  submaps held, verification, a judged pair never registered again) → each judged pair stored
+  as an edge.
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
 - **fetch**: when a peer joins, each tells the other what it holds (an advert,
@@ -109,13 +113,14 @@ class RobotNode:
         self.store = Store(path)
         self.mapper = Mapper(config)
         self.inbox: queue.Queue[Arrived | None] = queue.Queue()
+        self.kept: queue.Queue[Submap | None] = queue.Queue()  # stored, for matching
         # Robots a peer holds more of, None: stop.
         self.fetch_queue: queue.Queue[tuple[str, ...] | None] = queue.Queue()
         self._lock = threading.Lock()
         self._stopping = threading.Event()
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
-        self._busy = 0  # inbox items taken and not finished, and a running optimisation
+        self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
         self.arrivals = Arrivals()  # what arrived of each robot: where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
@@ -148,6 +153,7 @@ class RobotNode:
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
         for name, target in (
+            ("keep", self._keeping),
             ("match", self._matching),
             ("optimise", self._optimisation),
             ("fetch", self._fetcher),
@@ -253,7 +259,8 @@ class RobotNode:
     def _idle(self) -> bool:
         with self._lock:
             busy = self._busy
-        idle = self.inbox.empty() and self.fetch_queue.empty() and not self._changed.is_set()
+        idle = self.inbox.empty() and self.kept.empty() and self.fetch_queue.empty()
+        idle = idle and not self._changed.is_set()
         idle = idle and not self.outbox.pending()
         return busy == 0 and idle
 
@@ -399,19 +406,28 @@ class RobotNode:
         finally:
             with self._lock:
                 self._busy -= 1
-        while True:
-            item = self.inbox.get()
-            if item is None or self.stopping:
-                return
+        while (s := self.kept.get()) is not None and not self.stopping:
             try:
-                s = self._accept(item)
-                if s is not None:
-                    self._judge(self.mapper.hold([s]))
+                self._judge(self.mapper.hold([s]))
             except Exception:
-                log.exception("%s: handling %s/%d failed", self.robot, item.robot, item.seq)
+                log.exception("%s: matching %s/%d failed", self.robot, s.robot, s.seq)
             finally:
                 with self._lock:
                     self._busy -= 1
+
+    def _keeping(self) -> None:
+        while (item := self.inbox.get()) is not None and not self.stopping:
+            s = None
+            try:
+                s = self._accept(item)
+            except Exception:
+                log.exception("%s: keeping %s/%d failed", self.robot, item.robot, item.seq)
+            if s is None:
+                with self._lock:
+                    self._busy -= 1
+            else:
+                self.kept.put(s)
+        self.kept.put(None)
 
     def _accept(self, item: Arrived) -> Submap | None:
         """The decoded submap of ``item``, stored if received; None if held or bad."""
