@@ -42,6 +42,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -377,25 +378,31 @@ class RobotNode:
                 log.exception("%s: fetching %s failed", self.robot, sorted(wanted))
 
     def _fetch(self, robots: set[str]) -> None:
-        for r in sorted(robots):
-            if self.stopping:
-                return
-            since = self.arrivals.since(r, self.store.seqs(r))
-            # The adverts count what is stored; what is still queued here counts as arrived.
-            if since >= max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0):
-                continue
-            relay = self.arrivals.relayed(r, self.transport.peers())
-            got = self.transport.fetch(r, KIND, since, relay=relay)
-            if not got and not relay:
-                self.arrivals.unanswered(r)
-            for seq, payload in got:
-                self._enqueue_fetched(r, seq, payload)
+        # All robots' queries at once: a peer behind a stalled link holds each query until
+        # its timeout, and a meeting with the robot in between may end meanwhile.
+        with ThreadPoolExecutor(max(1, len(robots))) as pool:
+            list(pool.map(self._fetch_one, sorted(robots)))
+
+    def _fetch_one(self, r: str) -> None:
+        if self.stopping:
+            return
+        since = self.arrivals.since(r, self.store.seqs(r))
+        # The adverts count what is stored; what is still queued here counts as arrived.
+        if since >= max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0):
+            return
+        relay = self.arrivals.relayed(r, self.transport.peers())
+        got = self.transport.fetch(r, KIND, since, relay=relay)
+        if not got and not relay:
+            self.arrivals.unanswered(r)
+        for seq, payload in got:
+            self._enqueue_fetched(r, seq, payload)
 
     def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
         # A relay's reply too must carry the owner's seal.
         if not self.door.admit(robot, KIND, seq, payload) or not self.arrivals.add(robot, seq):
             return
-        self.counts["fetched"] += 1
+        with self._lock:  # fetches of several robots run at once
+            self.counts["fetched"] += 1
         self._enqueue(Arrived("fetched", robot, seq, payload))
 
     def _matching(self) -> None:
