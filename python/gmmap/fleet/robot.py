@@ -43,7 +43,6 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
 
 from gmmap.config import Config
@@ -53,6 +52,7 @@ from gmmap.fleet.arrivals import Arrivals
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
+from gmmap.fleet.events import Arrived, Built, BuiltCallback, sizes_of
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of
 from gmmap.fleet.reload import reload
@@ -69,29 +69,6 @@ log = logging.getLogger(__name__)
 
 KIND = "submap"
 META_FRAMES = "frames_consumed"
-
-
-@dataclass(frozen=True)
-class Arrived:
-    """An encoded submap for the matching stage: ``origin`` "own", "received" or "fetched"."""
-
-    origin: str
-    robot: str
-    seq: int
-    payload: bytes
-
-
-@dataclass(frozen=True)
-class Built:
-    """An own submap, built and sent: the submap as built (its ground truth, where the frames
-    had one, stays with it), its sizes and the node's status after sending it."""
-
-    submap: Submap
-    sizes: dict
-    status: dict
-
-
-BuiltCallback = Callable[[Built], None]
 
 
 class RobotNode:
@@ -135,7 +112,7 @@ class RobotNode:
         self.door = Door(config.robot.fleet, config.security, credentials)
         r = reload(self.store, self.mapper, self.door.inner, self.robot)
         self.reloaded, self._pending_reload = r.held, r.pending
-        self.wire = {seq: _sizes(s, n, None) for seq, (s, n) in r.own.items()}  # own seq → bytes
+        self.wire = {seq: sizes_of(s, n, None) for seq, (s, n) in r.own.items()}  # own seq → bytes
         self._changed.set()
         fleet = config.robot.fleet
         transport = TransportConfig(fleet, self.robot, config.transport, credentials, self.watch)
@@ -322,7 +299,7 @@ class RobotNode:
         )
         self.frames_consumed = consumed
         self.counts["built"] += 1
-        self.wire[s.seq] = {**_sizes(s, len(payload), s.n_points), "built_at": time.time()}
+        self.wire[s.seq] = {**sizes_of(s, len(payload), s.n_points), "built_at": time.time()}
         self.outbox.put(KIND, s.seq, payload)
         self._enqueue(Arrived("own", self.robot, s.seq, payload))
         if self.on_built is not None:
@@ -515,9 +492,3 @@ class RobotNode:
     def global_map(self):
         """The merged map of this robot's group (built from the held submaps), or None."""
         return self.mapper.global_map(self.robot)
-
-
-def _sizes(s: Submap, wire: int, n_points: int | None) -> dict:
-    points = None if n_points is None else 12 * int(n_points)
-    return {"wire": wire, "points_float32": points, "gmm_float32": int(s.gmm.float32_bytes),
-            "components": len(s.gmm)}  # fmt: skip
