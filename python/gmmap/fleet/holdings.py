@@ -2,11 +2,8 @@
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
 An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``: how many submaps of each robot
-the sender holds, its state, and the robots it hears directly. Its payload is binary, a few
-bytes per robot (`encode`): a byte for the state (0 mapping, 1 linger, 2 final), a varint
-count of robots, per robot in name order its name (varint length, UTF-8) and count (varint),
-then a varint count of the robots heard, each a varint: the index of a name above, or the
-number of names above followed by a name not among them. Counts, not sets: a
+the sender holds, its state, and the robots it hears directly, in a few bytes per robot
+(`encode`; the layout is in docs/wire-format.md, "Adverts"). Counts, not sets: a
 robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
 gap is still being filled, which the next advert shows. The state is ``mapping`` while the
 sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
