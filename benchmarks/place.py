@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.eval.place import PlaceSet, evaluate_place, sim_place_set, split_place_set
-from gmmap.eval.placedata import RECIPE
+from gmmap.eval.placedata import RECIPE, build
 from gmmap.io import datasets
 from gmmap.mapping.learned import LearnedDescriptor
 from gmmap.options import PlaceOptions
@@ -91,7 +91,7 @@ def main() -> None:
     sets = {}
     for name, p in held.items():
         say(f"held out: {name}")
-        sets[name] = sim_place_set(p.world, p.robots, p.seed, sensor=p.sensor)
+        sets[name] = build(p, DATA)
     say("held-out worlds, pooled")
     out["held_out_sim_pooled"] = {"parts": sorted(held), **both(pooled(sets), descriptors)}
     fr1 = DATA / "tum_fr1_xyz"

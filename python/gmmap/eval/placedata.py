@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.eval.place import PlaceSet, sim_place_set, split_place_set, world_points
-from gmmap.mapping.place import resample
+from gmmap.mapping.place import RESAMPLE_POINTS, resample
 
-CLOUD_POINTS = 4096
+CLOUD_POINTS = RESAMPLE_POINTS  # as the place database resamples a submap
 
 
 @dataclass(frozen=True)
