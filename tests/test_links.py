@@ -184,6 +184,57 @@ def test_zenoh_peers_talk_through_the_relay_and_it_sees_the_framing() -> None:
     assert counts["forward"].bytes > 0  # B's handshake and subscription
 
 
+def test_a_bundle_shares_packets_and_segments_are_ethernet_sized() -> None:
+    """Messages put back to back leave in one Zenoh batch: fewer packets than the same
+    messages apart. And the relay's sockets offer Ethernet's segment size, so a message
+    over 1,448 B is counted as the several packets it would be on a radio link."""
+    from gmmap.fleet.transport import Transport, TransportConfig
+    from gmmap.options import TransportOptions
+
+    port = free_port()
+    got: list[int] = []
+    with Relay(("127.0.0.1", port)) as relay:
+        a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
+        b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
+        with (
+            Transport(TransportConfig("f", "a", a_opts)) as a,
+            Transport(TransportConfig("f", "b", b_opts)) as b,
+        ):
+            b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
+            assert b.wait_for_peers(["a"], 10) and a.wait_for_peers(["b"], 10)
+            time.sleep(0.5)  # the subscription reaches a
+
+            def packets(send) -> int:
+                before, n = relay.counts(), len(got)
+                send()
+                assert wait(lambda: len(got) > n)
+                time.sleep(0.3)  # the ACKs
+                after = relay.counts()
+                return sum(after[d].packets - before[d].packets for d in after)
+
+            def apart() -> None:
+                for seq in range(4):
+                    a.publish("submap", seq, bytes(750))
+                    time.sleep(0.2)
+
+            bundled = packets(lambda: [a.publish("submap", 10 + s, bytes(750)) for s in range(4)])
+            separate = packets(apart)
+            big = packets(lambda: a.publish("submap", 20, bytes(6000)))
+    assert sorted(got)[:4] == [0, 1, 2, 3] and len(got) == 9
+    assert separate >= 8  # each message its packet and an ACK
+    assert bundled < separate
+    assert big >= 5  # 6,000 B in 1,448-byte segments, and at least one ACK
+
+
+def wait(cond, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return cond()
+
+
 def _demo(tmp_path: Path, robots: int, *flags: str, timeout: float) -> tuple:
     """``gmmap demo`` with ``robots`` robot processes, lingering 1.5 s and joining on one
     match, its output in ``tmp_path``: what the robots said (stderr) and its JSON summary."""

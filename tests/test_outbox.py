@@ -1,4 +1,4 @@
-"""The outbox (`gmmap.fleet.outbox`): priority order and the byte budget."""
+"""The outbox (`gmmap.fleet.outbox`): priority order, bundles and the byte budget."""
 
 import threading
 import time
@@ -73,6 +73,73 @@ def test_a_failed_publish_is_dropped_and_the_rest_go() -> None:
     assert box.flush(5)
     box.close()
     assert sorted(sent) == [0, 2]
+
+
+def _timed_box(bundle: int, wait: float) -> tuple[Outbox, list]:
+    sent: list = []
+    publish = lambda kind, seq, payload: sent.append((kind, seq, time.monotonic()))  # noqa: E731
+    return Outbox(publish, Budget(None), "have", SENDER, bundle, wait), sent
+
+
+def test_submaps_wait_until_a_bundle_is_full_then_leave_together() -> None:
+    box, sent = _timed_box(bundle=3, wait=30.0)
+    box.put("submap", 0, b"x")
+    box.put("submap", 1, b"x")
+    time.sleep(0.3)
+    assert sent == [] and box.pending() == 2
+    box.put("submap", 2, b"x")
+    assert wait_for(lambda: len(sent) == 3)
+    assert [s[1] for s in sent] == [2, 1, 0]  # newest first, back to back
+    assert sent[-1][2] - sent[0][2] < 0.1
+    box.close()
+
+
+def test_a_bundle_leaves_when_its_oldest_has_waited_long_enough() -> None:
+    box, sent = _timed_box(bundle=3, wait=0.4)
+    start = time.monotonic()
+    box.put("submap", 0, b"x")
+    assert wait_for(lambda: len(sent) == 1)
+    assert sent[0][2] - start >= 0.35
+
+
+@pytest.mark.parametrize("how", ["advert", "release", "flush"])
+def test_an_advert_or_the_end_of_the_frames_sends_what_waits(how: str) -> None:
+    box, sent = _timed_box(bundle=3, wait=30.0)
+    box.put("submap", 0, b"x")
+    time.sleep(0.1)
+    if how == "advert":
+        box.put("have", 0, b"{}")
+    elif how == "release":
+        box.release()
+    else:
+        assert box.flush(5)
+    assert wait_for(lambda: box.pending() == 0)
+    expected = [("have", 0), ("submap", 0)] if how == "advert" else [("submap", 0)]
+    assert [s[:2] for s in sent] == expected
+    box.put("submap", 1, b"x")
+    if how == "advert":  # an advert sends what waits; the next submap waits again
+        time.sleep(0.2)
+        assert box.pending() == 1
+    else:  # the frames ended: nothing waits any more
+        assert wait_for(lambda: len(sent) == 2)
+    box.close()
+
+
+def wait_for(cond, timeout: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.01)
+    return cond()
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5])
+def test_a_bad_bundle_is_refused(bad) -> None:
+    with pytest.raises(InvalidInputError):
+        RobotOptions(bundle=bad)
+    with pytest.raises(InvalidInputError):
+        RobotOptions(bundle_wait=float(bad) - 2)
 
 
 @pytest.mark.parametrize("bad", [0.0, -5.0, float("nan"), float("inf")])

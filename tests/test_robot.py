@@ -102,7 +102,8 @@ def _close_nodes():
 
 def node(tmp_path, name, port, peers=(), fleet="f"):
     config = Config(
-        robot=RobotOptions(name=name, fleet=fleet, store=str(tmp_path / f"{name}.db")),
+        # Each submap at once: these tests are about what arrives, not when.
+        robot=RobotOptions(name=name, fleet=fleet, store=str(tmp_path / f"{name}.db"), bundle=1),
         transport=TransportOptions(port=port, connect=[f"tcp/127.0.0.1:{p}" for p in peers]),
         build=SLICE_BUILD,
         backend=SLICE_BACKEND,

@@ -70,7 +70,10 @@ class RobotOptions:
     ``rejudge``: at the end, every pair held is judged again in one call, so that the final
     maps are an offline merge's of the same submaps, whatever order they arrived in.
     ``budget``: bytes/s of payload and keys the robot puts on each link, submaps, adverts and
-    fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap."""
+    fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap.
+    ``bundle``: own submaps sent together, in one Zenoh batch that shares its packets' headers
+    and ACKs; a submap waits at most ``bundle_wait`` s for the others, and none waits once the
+    frames end or an advert is due (1: each at once)."""
 
     name: str = "robot"
     fleet: str = "gmmap"
@@ -81,8 +84,14 @@ class RobotOptions:
     deadline: float = 120.0
     rejudge: bool = True
     budget: float | None = None
+    bundle: int = 3
+    bundle_wait: float = 8.0
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.bundle, int) and self.bundle >= 1):
+            raise InvalidInputError(f"robot.bundle must be an integer >= 1, got {self.bundle!r}")
+        if not (math.isfinite(self.bundle_wait) and self.bundle_wait >= 0):
+            raise InvalidInputError(f"robot.bundle_wait must be >= 0 s, got {self.bundle_wait}")
         if self.budget is not None and not (math.isfinite(self.budget) and self.budget > 0):
             raise InvalidInputError(f"robot.budget must be > 0 bytes/s or null, got {self.budget}")
         check_name("robot.name", self.name)

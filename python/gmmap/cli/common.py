@@ -184,6 +184,12 @@ BUDGET = setting(
     "Bytes/s of payload the robot puts on each link, newest submaps first.",
     type=float,
 )
+BUNDLE = setting(
+    "--bundle",
+    "robot.bundle",
+    "Own submaps sent together (fewer packets; each waits up to robot.bundle_wait s).",
+    type=click.IntRange(min=1),
+)
 DESCRIPTOR = setting(
     "--descriptor",
     "place.descriptor",

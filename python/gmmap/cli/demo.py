@@ -27,6 +27,7 @@ import click
 
 from gmmap.cli.common import (
     BUDGET,
+    BUNDLE,
     MIN_MATCHES,
     as_json_option,
     config_option,
@@ -392,6 +393,7 @@ def format_report(r: dict) -> str:
 @MIN_MATCHES
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
 @BUDGET
+@BUNDLE
 @setting(
     "--deadline",
     "robot.deadline",

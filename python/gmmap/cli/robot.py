@@ -10,6 +10,7 @@ import click
 
 from gmmap.cli.common import (
     BUDGET,
+    BUNDLE,
     COVARIANCE,
     FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
@@ -58,6 +59,7 @@ from gmmap.config import Config
 @MIN_CONFIDENCE
 @setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
 @BUDGET
+@BUNDLE
 @setting(
     "--deadline", "robot.deadline", "Latest end after mapping, peers complete or not.", type=float
 )

@@ -10,7 +10,8 @@ from collections.abc import Iterable
 
 # A present robot that has sent nothing directly for this long, while others hold more of it,
 # is fetched through them: a rendezvous link that went down stays "present" until Zenoh's
-# lease expires (30 s), and a short meeting with a robot in between would pass unused.
+# lease expires (30 s), and a short meeting with a robot in between would pass unused. A robot
+# that bundles its submaps (`RobotOptions.bundle_wait`) is quiet longer by design.
 QUIET_S = 5.0
 
 
@@ -19,12 +20,12 @@ class Arrivals:
     answer a fetch for their own submaps or have been quiet (thread-safe: Zenoh's threads and
     the fetcher). Times are ``clock()`` seconds."""
 
-    def __init__(self, clock=time.monotonic) -> None:
+    def __init__(self, clock=time.monotonic, quiet_s: float = QUIET_S) -> None:
         self._lock = threading.Lock()
         self._seqs: dict[str, set[int]] = {}
         self._silent: set[str] = set()
         self._heard: dict[str, float] = {}  # when it joined or last sent us something itself
-        self._clock = clock
+        self._clock, self._quiet_s = clock, quiet_s
 
     def met(self, robot: str) -> None:
         """``robot`` joined: its quiet time starts now."""
@@ -53,10 +54,10 @@ class Arrivals:
 
     def relayed(self, robot: str, present: Iterable[str]) -> bool:
         """Whether the robots in between must answer for ``robot``: it is out of reach, or
-        present and silent or quiet for QUIET_S (a link that stalled: Zenoh sees it leave only
+        present and silent or quiet for ``quiet_s`` (a link that stalled: Zenoh sees it leave only
         when its lease expires)."""
         with self._lock:
-            quiet = self._clock() > self._heard.get(robot, -float("inf")) + QUIET_S
+            quiet = self._clock() > self._heard.get(robot, -float("inf")) + self._quiet_s
             return robot not in set(present) or robot in self._silent or quiet
 
     def unanswered(self, robot: str) -> None:

@@ -15,7 +15,9 @@ packets each side sent, ACKs, handshakes and retransmissions included. ``LinkCou
 adds each packet's headers to the payload: IPv4, TCP with the timestamp option where the
 connection negotiated it, and Ethernet (`HEADER_BYTES`). A direction is counted where the
 relay receives it, as its sender segmented it: the connecting side's packets on the relay's
-accepted socket, the target's on the socket to the target.
+accepted socket, the target's on the socket to the target. Both sockets offer Ethernet's
+segment size (``SEGMENT``), not loopback's 64 KiB, so a message over 1,448 bytes is counted
+as the several packets (and ACKs) it would be on a radio or Ethernet link.
 
 Peers in Zenoh's peer mode tell each other where they listen (gossip) and would connect
 directly, around the relay; a fleet behind relays turns gossip off
@@ -89,6 +91,13 @@ def received(sock: socket.socket) -> Received:
 class _Direction:
     count: LinkCount = field(default_factory=LinkCount)
     free_at: float = 0.0  # when the rate cap lets the next byte go (monotonic)
+
+
+def _ethernet_segments(sock: socket.socket) -> None:
+    """Have both ends of ``sock``'s connection send segments of at most ``SEGMENT`` bytes
+    (the MSS it offers in its SYN)."""
+    with contextlib.suppress(OSError, AttributeError):
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_MAXSEG, SEGMENT)
 
 
 def _dup(sock) -> socket.socket:
@@ -174,6 +183,7 @@ class Relay:
     async def _serve(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        _ethernet_segments(sock)
         sock.bind((self._host, self._port))
         self._port = sock.getsockname()[1]
         self._server = await asyncio.start_server(self._accept, sock=sock)
@@ -187,9 +197,14 @@ class Relay:
         await asyncio.gather(*self._tasks, return_exceptions=True)
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        up = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        _ethernet_segments(up)
+        up.setblocking(False)
         try:
-            up_reader, up_writer = await asyncio.open_connection(*self.target)
+            await self._loop.sock_connect(up, self.target)
+            up_reader, up_writer = await asyncio.open_connection(sock=up)
         except OSError:
+            up.close()
             writer.close()
             return
         pumps = [

@@ -3,7 +3,7 @@
 Stages, each a thread:
 
 - **construction**: frames → `SubmapBuilder` → `gmmap.encode` → own store → outbox (kind
-  "submap"; `gmmap.fleet.outbox`: sent in priority order within ``robot.budget``). The node
+  "submap"; `gmmap.fleet.outbox`: in bundles, in priority order within ``robot.budget``). The node
   works on what it sent: the decoded copy of its own submap, the same bytes every other robot
   sees, goes on to matching. Each built submap is also given to ``on_built`` (a `Built`
   event: status lines, evaluation outside the node).
@@ -16,13 +16,12 @@ Stages, each a thread:
   as an edge.
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
-- **fetch**: when a peer joins, each tells the other what it holds (an advert,
+- **fetch**: when a peer joins, a robot that holds anything tells it what (an advert,
   `gmmap.fleet.holdings`), and each fetches the robots the other's advert holds more of (from
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
   reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
-  between (`Transport.answers_for`), even while it maps. Robots that meet fresh hold nothing
-  to fetch and send no query.
+  between (`Transport.answers_for`), even while it maps. Robots that meet fresh send neither.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -48,7 +47,7 @@ from pathlib import Path
 from gmmap.config import Config
 from gmmap.errors import DecodeError
 from gmmap.fleet import holdings, linkstats
-from gmmap.fleet.arrivals import Arrivals
+from gmmap.fleet.arrivals import QUIET_S, Arrivals
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
@@ -99,7 +98,8 @@ class RobotNode:
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
-        self.arrivals = Arrivals()  # what arrived of each robot: where fetches start
+        quiet = max(QUIET_S, config.robot.bundle_wait + holdings.SETTLE_S)  # peers bundle too
+        self.arrivals = Arrivals(quiet_s=quiet)  # what arrived of each robot: where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
@@ -118,7 +118,8 @@ class RobotNode:
         transport = TransportConfig(fleet, self.robot, config.transport, credentials, self.watch)
         self.transport = Transport(transport)
         self.budget = Budget(config.robot.budget)
-        self.outbox = Outbox(self._publish, self.budget, holdings.KIND, (fleet, self.robot))
+        sending = (fleet, self.robot), config.robot.bundle, config.robot.bundle_wait
+        self.outbox = Outbox(self._publish, self.budget, holdings.KIND, *sending)
 
     # ---- lifecycle --------------------------------------------------------------------------
 
@@ -182,6 +183,9 @@ class RobotNode:
         end = start + max(seconds, self.config.robot.deadline)
         seen, changed, fetch, said, complete = None, start, start, start, False
         self._state = holdings.LINGER
+        # Our last submaps leave now, and our news with them: in one batch, one ACK.
+        self._advertise(self._held(), holdings.LINGER)
+        self.outbox.release()
         while not self.stopping and (now := time.monotonic()) < end:
             mine = self._held()
             present = self.transport.peers()
@@ -211,6 +215,7 @@ class RobotNode:
             self.drain(timeout=max(5.0, seconds))
         self._advertise(self._held(), holdings.FINAL)  # done: the peers need not wait for us
         self.outbox.flush(timeout=max(5.0, seconds))
+        self.transport.close()  # done with the fleet: rejudging it would only cost keep-alives
         if self.config.robot.rejudge and not self.stopping:
             if progress:
                 progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
@@ -332,9 +337,10 @@ class RobotNode:
     def _joined(self, peer: str) -> None:
         """A peer joined: tell it what we hold once its subscriber is surely declared."""
         self.arrivals.met(peer)
-        threading.Timer(holdings.SETTLE_S, self._tell, (time.monotonic(),)).start()
+        if any(self._held().values()):  # else it missed nothing: what we build, it hears
+            threading.Timer(holdings.SETTLE_S, self._tell, (time.monotonic(),)).start()
 
-    def _tell(self, joined: float) -> None:  # unless an advert reached it, or we hold nothing
+    def _tell(self, joined: float) -> None:  # unless an advert reached it
         held = self._held() if not self.stopping else {}
         if any(held.values()) and self._told_at < joined + holdings.SETTLE_S / 2:
             self._advertise(held, self._state)

@@ -1,9 +1,10 @@
 """Opening the fleet transport's Zenoh session (`gmmap.fleet.transport`): the Zenoh configuration
 from `TransportOptions`, and the endpoint to listen on.
 
-The lease is 30 s, not Zenoh's 10 s: a session sends a keep-alive every lease / 4 when it has
-nothing else to send, and on a 500 B/s link Zenoh's default keep-alives take a fifth of it
-(docs/benchmarks.md, the idle link). An outage shorter than the lease is a stall the link
+The lease is 30 s, not Zenoh's 10 s, with a keep-alive every 15 s (lease / 2, not Zenoh's
+lease / 4) when a session has nothing else to send: on a 500 B/s link Zenoh's defaults would
+take a fifth of it, and each keep-alive costs two packets (docs/benchmarks.md, the idle link).
+Two per lease still let one be late. An outage shorter than the lease is a stall the link
 resumes from, not a reconnection with its handshake and declarations; a robot that died
 silently is seen gone after 30 s, and a robot waits for such a peer anyway
 (`gmmap.fleet.holdings`). ``transport.zenoh_options`` can set another.
@@ -21,7 +22,7 @@ from gmmap.fleet.access import acl, tls_entries
 from gmmap.fleet.keys import free_port
 from gmmap.options import TransportOptions
 
-LEASE = {"transport/link/tx/lease": 30_000}  # ms
+LEASE = {"transport/link/tx/lease": 30_000, "transport/link/tx/keep_alive": 2}  # ms; per lease
 
 
 def zenoh_config(
