@@ -13,7 +13,9 @@ difference to the whole run is what one more delivered submap costs on the wire,
 sessions' set-up and the ending apart). Per case: submaps lost
 (built but never delivered to a peer in reach; goal 0), and on rendezvous links those
 built after their robot left every peer's reach for good (``out_of_reach``: no protocol can
-deliver them; `gmmap.eval.delivery`), whether every robot ended complete, the wall
+deliver them; `gmmap.eval.delivery`) and of the lost those that contacts of at least 2 s
+could have carried (``lost_lasting``; the others met their peers only for less), whether
+every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
 whether the robots end holding the same submaps, groups and pose-graph matches as on
@@ -82,6 +84,8 @@ def case(robots: int, name: str) -> dict:
         reports = {n: json.loads((Path(out) / f"{n}.json").read_text()) for n in r["received"]}
         curves = completeness({n: Path(out) / f"{n}.sqlite" for n in reports})
     lost = sum(r["lost"].values())
+    # On links that stay every contact lasts.
+    lost_lasting = sum(r["lost_lasting"].values()) if "lost_lasting" in r else lost
     unreachable = sum(r.get("out_of_reach", {}).values())
     held_all = not lost and not unreachable
     return {
@@ -89,6 +93,7 @@ def case(robots: int, name: str) -> dict:
         "all_held_after_s": round(max(t[-1] for t, _ in curves.values()), 1) if held_all else None,
         "curve": fleet_curve(curves),
         "lost": lost,
+        "lost_lasting": lost_lasting,
         "out_of_reach": unreachable,
         "complete": all(rep["complete"] for rep in reports.values()),
         "wall_s": round(r["wall_s"], 1),

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from gmmap.eval.delivery import links_up, reachable
+from gmmap.eval.delivery import lasting, links_up, reachable
 
 
 def test_a_submap_reaches_the_robots_a_chain_of_later_meetings_leads_to() -> None:
@@ -23,3 +23,16 @@ def test_links_stay_as_they_ended_after_the_last_frame() -> None:
     linked = links_up(lambda i, j, k: k == 2, [(0, 1)], 2, 3)
     assert reachable(linked, 0, 7) == {1}
     assert not np.any(linked[:2])
+
+
+def test_only_lasting_contacts_count_when_asked() -> None:
+    up = np.zeros((10, 3, 3), dtype=bool)
+    up[1, 0, 1] = up[1, 1, 0] = True  # one frame: brief
+    up[3:6, 1, 2] = up[3:6, 2, 1] = True  # three frames
+    up[8:, 0, 2] = up[8:, 2, 0] = True  # as the links end: lasting
+    kept = lasting(up, 3)
+    assert not kept[:, 0, 1].any()
+    assert kept[3:6, 1, 2].all() and kept[3:6, 2, 1].all() and kept[:, 1, 2].sum() == 3
+    assert kept[8:, 0, 2].all()
+    assert reachable(up, 0, 0) == {1, 2}
+    assert reachable(kept, 0, 0) == {2}  # the brief meeting with 1 is no chance

@@ -60,6 +60,9 @@ def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
     return tuple(check_endpoint(e, listen=what == "listen") for e in endpoints)
 
 
+DEFAULT_BUNDLE = 3  # own submaps sent together (`RobotOptions.bundle`)
+
+
 @dataclass(frozen=True)
 class RobotOptions:
     """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
@@ -73,7 +76,8 @@ class RobotOptions:
     fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap.
     ``bundle``: own submaps sent together, in one Zenoh batch that shares its packets' headers
     and ACKs; a submap waits at most ``bundle_wait`` s for the others, and none waits once the
-    frames end or an advert is due (1: each at once)."""
+    frames end or an advert is due (1: each at once). None: ``DEFAULT_BUNDLE``, or 1 where
+    `gmmap demo` emulates links that come and go: a passing contact cannot wait."""
 
     name: str = "robot"
     fleet: str = "gmmap"
@@ -84,11 +88,16 @@ class RobotOptions:
     deadline: float = 120.0
     rejudge: bool = True
     budget: float | None = None
-    bundle: int = 3
+    bundle: int | None = None
     bundle_wait: float = 8.0
 
+    @property
+    def bundle_size(self) -> int:
+        """``bundle``, or its default where None."""
+        return self.bundle or DEFAULT_BUNDLE
+
     def __post_init__(self) -> None:
-        if not (isinstance(self.bundle, int) and self.bundle >= 1):
+        if self.bundle is not None and not (isinstance(self.bundle, int) and self.bundle >= 1):
             raise InvalidInputError(f"robot.bundle must be an integer >= 1, got {self.bundle!r}")
         if not (math.isfinite(self.bundle_wait) and self.bundle_wait >= 0):
             raise InvalidInputError(f"robot.bundle_wait must be >= 0 s, got {self.bundle_wait}")

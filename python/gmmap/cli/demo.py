@@ -44,6 +44,10 @@ from gmmap.options import drift_overrides
 
 RENDEZVOUS_PACE = 2.0  # the robots' pace on rendezvous links: twice as fast as they drive
 STARTUP_S = 3.0  # from launching the robot processes to their first frame, on rendezvous links
+# A contact that carries a submap to a robot that met no one for longer than the lease: a
+# session opens (Zenoh retries its connection every second at first), its advert follows
+# holdings.SETTLE_S later, and a fetch crosses.
+LASTING_S = 2.0
 
 
 def run_demo(
@@ -140,7 +144,7 @@ def run_demo(
 
         report["lost"] = lost(reports)
     else:  # links that come and go: lost is what a peer in reach never got
-        report["lost"], report["out_of_reach"] = _reach_losses(config, reach, names, out)
+        report.update(_reach_losses(config, reach, names, out))
     if relays:
         from gmmap.eval.wire import wire_report
 
@@ -157,12 +161,15 @@ def run_demo(
 
 def paced(config: Config) -> Config:
     """With rendezvous links the robots move in step (`SimOptions.pace`, `RENDEZVOUS_PACE`
-    unless set), from a common start a moment from now, once the processes are up."""
+    unless set), from a common start a moment from now, once the processes are up, and send
+    each submap at once (`RobotOptions.bundle` 1 unless set): a contact may last a second."""
     sim = config.sim
     if not config.link.rendezvous:
         return config
     pace = sim.pace or RENDEZVOUS_PACE
-    return replace(config, sim=replace(sim, pace=pace, start=time.time() + STARTUP_S))
+    robot = replace(config.robot, bundle=config.robot.bundle or 1)
+    sim = replace(sim, pace=pace, start=time.time() + STARTUP_S)
+    return replace(config, sim=sim, robot=robot)
 
 
 def rendezvous(config: Config, max_frames: int | None = None):
@@ -341,14 +348,20 @@ def _relay(proc: subprocess.Popen, log) -> None:
     err.join(timeout=5)
 
 
-def _reach_losses(config: Config, reach, names: list[str], out: Path) -> tuple:
+def _reach_losses(config: Config, reach, names: list[str], out: Path) -> dict:
     """On rendezvous links (``reach``), per robot its submaps a peer in reach after them never
-    got (lost) and those no peer could reach (`gmmap.eval.delivery`), from the robots' stores."""
-    from gmmap.eval.delivery import links_up, lost_in_reach
+    got (``lost``), those no peer could reach (``out_of_reach``), and of the lost those that
+    contacts of at least `LASTING_S` could have carried (``lost_lasting``; the rest had only
+    briefer ones), from the robots' stores (`gmmap.eval.delivery`)."""
+    from gmmap.eval.delivery import lasting, links_up, lost_in_reach
 
     n = len(names)
     linked = links_up(reach.up, config.link.pairs(n), n, reach.frames)
-    return lost_in_reach({name: out / f"{name}.sqlite" for name in names}, linked, reach.frame)
+    stores = {name: out / f"{name}.sqlite" for name in names}
+    lost, unreachable = lost_in_reach(stores, linked, reach.frame)
+    frames = round(LASTING_S * config.sim.rate * config.sim.pace)
+    lost_lasting, _ = lost_in_reach(stores, lasting(linked, frames), reach.frame)
+    return {"lost": lost, "out_of_reach": unreachable, "lost_lasting": lost_lasting}
 
 
 def format_report(r: dict) -> str:

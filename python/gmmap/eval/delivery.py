@@ -1,7 +1,8 @@
 """Which submaps a fleet lost: built, in reach of a peer at some moment after, and never
 delivered to it (`gmmap demo`'s ``lost``). On links that come and go (rendezvous links) a
 submap built after its robot left everyone's reach for good cannot be delivered by any
-protocol: it counts as ``out_of_reach``, not as lost.
+protocol: it counts as ``out_of_reach``, not as lost. Where contacts are brief, `lasting`
+tells the losses a contact long enough to open a session could have prevented.
 """
 
 from __future__ import annotations
@@ -35,6 +36,22 @@ def links_up(
         for k in range(frames):
             linked[k, i, j] = linked[k, j, i] = up(i, j, k)
     return linked
+
+
+def lasting(linked: np.ndarray, frames: int) -> np.ndarray:
+    """``linked`` (`links_up`) with only the contacts that last at least ``frames`` frames:
+    a contact shorter than it takes a session to open and an advert to cross is no chance
+    for a protocol that opens sessions. The links as they end count as lasting."""
+    kept = np.zeros_like(linked)
+    n = linked.shape[1]
+    for i in range(n):
+        for j in range(i + 1, n):
+            up = linked[:, i, j]
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], up.astype(int), [0]])))
+            for start, end in zip(edges[::2], edges[1::2], strict=True):
+                if end - start >= frames or end == len(up):
+                    kept[start:end, i, j] = kept[start:end, j, i] = True
+    return kept
 
 
 def reachable(linked: np.ndarray, origin: int, frame: int) -> set[int]:

@@ -47,7 +47,7 @@ from pathlib import Path
 from gmmap.config import Config
 from gmmap.errors import DecodeError
 from gmmap.fleet import holdings, linkstats
-from gmmap.fleet.arrivals import QUIET_S, Arrivals
+from gmmap.fleet.arrivals import Arrivals, quiet_for
 from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
@@ -98,7 +98,7 @@ class RobotNode:
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
-        quiet = max(QUIET_S, config.robot.bundle_wait + holdings.SETTLE_S)  # peers bundle too
+        quiet = quiet_for(config.robot.bundle_size, config.robot.bundle_wait)
         self.arrivals = Arrivals(quiet_s=quiet)  # what arrived of each robot: where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
@@ -118,7 +118,7 @@ class RobotNode:
         transport = TransportConfig(fleet, self.robot, config.transport, credentials, self.watch)
         self.transport = Transport(transport)
         self.budget = Budget(config.robot.budget)
-        sending = (fleet, self.robot), config.robot.bundle, config.robot.bundle_wait
+        sending = (fleet, self.robot), config.robot.bundle_size, config.robot.bundle_wait
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, *sending)
 
     # ---- lifecycle --------------------------------------------------------------------------
