@@ -8,17 +8,19 @@ import threading
 import time
 from collections.abc import Iterable
 
+from gmmap.options import RobotOptions
+
 # A present robot that has sent nothing directly for this long, while others hold more of it,
 # is fetched through them: a rendezvous link that went down stays "present" until Zenoh's
 # lease expires (30 s), and a short meeting with a robot in between would pass unused.
 QUIET_S = 5.0
 
 
-def quiet_for(bundle: int, bundle_wait: float) -> float:
+def quiet_for(robot: RobotOptions) -> float:
     """How long a present robot may send nothing before it counts as quiet, in a fleet whose
-    robots send ``bundle`` submaps together after at most ``bundle_wait`` s (as we do, so do
-    our peers, `RobotOptions.bundle`): a robot that bundles is quiet longer by design."""
-    return QUIET_S if bundle <= 1 else max(QUIET_S, bundle_wait + 1.0)
+    robots bundle their submaps as ``robot`` does (`RobotOptions.bundle`): a robot that
+    bundles is quiet longer by design."""
+    return QUIET_S if robot.bundle_size <= 1 else max(QUIET_S, robot.bundle_wait + 1.0)
 
 
 class Arrivals:

@@ -98,8 +98,7 @@ class RobotNode:
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
-        quiet = quiet_for(config.robot.bundle_size, config.robot.bundle_wait)
-        self.arrivals = Arrivals(quiet_s=quiet)  # what arrived of each robot: where fetches start
+        self.arrivals = Arrivals(quiet_s=quiet_for(config.robot))  # where fetches start
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
@@ -375,8 +374,9 @@ class RobotNode:
             return
         relay = self.arrivals.relayed(r, self.transport.peers())
         got = self.transport.fetch(r, KIND, since, relay=relay)
-        if not got and not relay:
+        if not got and not relay:  # its link to us stalled: at once through those in between
             self.arrivals.unanswered(r)
+            got = self.transport.fetch(r, KIND, since, relay=True)
         for seq, payload in got:
             self._enqueue_fetched(r, seq, payload)
 
