@@ -124,6 +124,8 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
             f" status_topic: /{name}/gmmap/status, publish_every_s: 0.5}}\n"
             "build: {frames_per_submap: 2, n_components: 60, covariance: full}\n"
             "backend: {min_matches: 1}\n"
+            # Each submap at once: both robots stop as soon as the first tree is published.
+            "robot: {bundle: 1}\n"
         )
         peer = ("--peer", f"tcp/127.0.0.1:{ports[other]}", "--port", str(ports[name]))
         nodes.append(robot(name, config, tmp_path / f"{name}.json", roscore, *peer))

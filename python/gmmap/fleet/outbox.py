@@ -136,7 +136,10 @@ class Outbox:
             time.sleep(0.02)
         return not self.pending()
 
-    def close(self) -> None:
+    def close(self, flush_s: float = 0.0) -> None:
+        """Stop sending, after up to ``flush_s`` s sending what waits (a bundle held back)."""
+        if flush_s > 0:
+            self.flush(flush_s)
         self._stop.set()
         with self._cond:
             self._cond.notify_all()

@@ -68,6 +68,7 @@ log = logging.getLogger(__name__)
 
 KIND = "submap"
 META_FRAMES = "frames_consumed"
+STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
 class RobotNode:
@@ -130,12 +131,8 @@ class RobotNode:
         t.on_join(self._joined)
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
-        for name, target in (
-            ("keep", self._keeping),
-            ("match", self._matching),
-            ("optimise", self._optimisation),
-            ("fetch", self._fetcher),
-        ):
+        stages = (self._keeping, self._matching, self._optimisation, self._fetcher)
+        for name, target in zip(("keep", "match", "optimise", "fetch"), stages, strict=True):
             self._spawn(name, target)
 
     def _serve(self) -> None:
@@ -256,7 +253,8 @@ class RobotNode:
         return False
 
     def stop(self) -> None:
-        """Stop the stages (queued work is dropped: it is in the store), close transport/store."""
+        """Stop the stages (queued work is dropped: it is in the store; a held bundle gets
+        STOP_FLUSH_S to leave), close transport and store."""
         if self._closed:
             return
         self._closed = True
@@ -264,7 +262,7 @@ class RobotNode:
         self._changed.set()
         self.inbox.put(None)
         self.fetch_queue.put(None)
-        self.outbox.close()
+        self.outbox.close(flush_s=0.0 if self.transport.closed else STOP_FLUSH_S)
         self.transport.close()
         for th in self._threads:
             if th is not threading.current_thread():
