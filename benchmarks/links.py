@@ -20,7 +20,8 @@ time, the time until every robot held every submap, the bytes on the wire per de
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
 whether the robots end holding the same submaps, groups and pose-graph matches as on
 perfect links, and how far apart their optimised anchors end (m). Also the
-bytes and packets an idle link between two robots carries per minute. With
+bytes and packets an idle link between two robots carries per minute, and the bytes on the
+wire per 750 B submap sent alone or in bundles of 2 to 6 (`RobotOptions.bundle`). With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
 (``completeness_<n>_robots.png``). On rendezvous links a robot that ends out of everyone's
 reach keeps its last submaps (they would go at the next meeting) and the others wait for it
@@ -32,6 +33,7 @@ until the deadline (30 s): those submaps are out of reach, and the robots end in
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import tempfile
@@ -136,9 +138,10 @@ def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
     return t.round(2).tolist(), np.mean(held, axis=0).round(4).tolist()
 
 
-def idle(seconds: float) -> dict:
-    """What two robots' transports (presence, subscription, fetch service) put on the link
-    between them while neither has anything to send, per minute, in both directions."""
+@contextlib.contextmanager
+def _pair(tmp: str):
+    """Two robots' transports, b reaching a through a counting relay, both serving a store
+    and subscribed: (relay, a, b, messages b received)."""
     from gmmap.fleet.keys import free_port
     from gmmap.fleet.links import ZENOH_NO_GOSSIP, Relay
     from gmmap.fleet.store import Store
@@ -146,7 +149,8 @@ def idle(seconds: float) -> dict:
     from gmmap.options import TransportOptions
 
     port = free_port()
-    with tempfile.TemporaryDirectory() as tmp, Relay(("127.0.0.1", port)) as relay:
+    got: list[int] = []
+    with Relay(("127.0.0.1", port)) as relay:
         a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
         b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
         with (
@@ -156,18 +160,51 @@ def idle(seconds: float) -> dict:
         ):
             for t in (a, b):
                 t.serve(store.fetch_provider, store.robots)
-                t.subscribe(lambda *_: None)
+            a.subscribe(lambda *_: None)
+            b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
             if not b.wait_for_peers(["a"], 10):
-                raise RuntimeError("the idle robots did not meet")
+                raise RuntimeError("the robots did not meet")
             time.sleep(2.0)  # declarations settle
-            before = relay.counts()
-            time.sleep(seconds)
-            after = relay.counts()
-    per_min = 60.0 / seconds
+            yield relay, a, b, got
+
+
+def _wire(relay, before) -> dict[str, int]:
+    """The wire bytes and packets the relay counted since ``before``, both directions."""
+    after = relay.counts()
     return {
-        k: round(sum(getattr(after[d], k) - getattr(before[d], k) for d in after) * per_min)
+        k: sum(getattr(after[d], k) - getattr(before[d], k) for d in after)
         for k in ("wire_bytes", "packets")
     }
+
+
+def idle(seconds: float) -> dict:
+    """What two robots' transports (presence, subscription, fetch service) put on the link
+    between them while neither has anything to send, per minute, in both directions."""
+    with tempfile.TemporaryDirectory() as tmp, _pair(tmp) as (relay, *_):
+        before = relay.counts()
+        time.sleep(seconds)
+        wire = _wire(relay, before)
+    return {k: round(v * 60.0 / seconds) for k, v in wire.items()}
+
+
+def bundles(sizes=(1, 2, 3, 4, 6), repeats: int = 10, payload: int = 750) -> dict:
+    """Bytes on the wire per ``payload``-byte submap (both directions: headers, ACKs and
+    Zenoh's framing included) when submaps leave alone or ``size`` back to back, as the
+    outbox's bundles do (`RobotOptions.bundle`), on the relay's 1,448-byte segments."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp, _pair(tmp) as (relay, a, _, got):
+        seq = 0
+        for size in sizes:
+            before = relay.counts()
+            for _ in range(repeats):
+                for _ in range(size):
+                    a.publish("submap", seq, bytes(payload))
+                    seq += 1
+                time.sleep(0.3)  # the ACKs, and the next bundle apart
+            out[str(size)] = round(_wire(relay, before)["wire_bytes"] / (size * repeats), 1)
+        if len(got) != seq:
+            raise RuntimeError(f"{seq - len(got)} of {seq} messages did not arrive")
+    return out
 
 
 def marginal(rows: dict) -> float | None:
@@ -193,6 +230,8 @@ def main() -> None:
     args = parser.parse_args()
     out: dict = {"idle_link_per_minute": idle(args.idle_s)}
     print(f"idle link: {out['idle_link_per_minute']}", file=sys.stderr, flush=True)
+    out["wire_bytes_per_submap_by_bundle"] = bundles()
+    print(f"bundles: {out['wire_bytes_per_submap_by_bundle']}", file=sys.stderr, flush=True)
     for robots in (int(n) for n in args.robots.split(",")):
         rows = {}
         for name in args.cases.split(","):

@@ -391,6 +391,11 @@ def format_report(r: dict) -> str:
         per = r["wire_bytes_per_delivered_submap"]
         per_text = f"{per:.0f} B on the wire per delivered submap" if per else "none delivered"
         lines.append(f"wire            {sent}; {per_text}")
+    delivery = f"{sum(r.get('lost', {}).values())} submaps lost"
+    if "out_of_reach" in r:
+        lasting, away = (sum(r[k].values()) for k in ("lost_lasting", "out_of_reach"))
+        delivery += f" ({lasting} in contacts of {LASTING_S:.0f} s or more), {away} out of reach"
+    lines.append(f"delivery        {delivery}")
     lines.append(f"map             {r.get('map_png')}")
     if r.get("map_rrd"):
         lines.append(f"rerun           {r['map_rrd']} (open with: rerun {r['map_rrd']})")

@@ -15,8 +15,8 @@ Own submaps leave in bundles (`RobotOptions.bundle`): the outbox holds them unti
 wait, or the oldest has waited ``bundle_wait`` s, or an advert is due, or the robot's frames
 ended (`Outbox.release`), and then sends all that waits back to back. Zenoh puts messages
 queued within a millisecond into one batch, so a bundle shares its TCP/IP headers and ACKs:
-on a link of 1,448-byte segments a 750 B submap costs about 910 B on the wire alone, 855 B in
-threes, 843 B in fours (docs/benchmarks.md, "links"). The price is latency: a submap may
+on a link of 1,448-byte segments a 750 B submap costs about 905 B on the wire alone, 860 B in
+threes, 840 B in fours (docs/benchmarks.md, "links", by bundle). The price is latency: a submap may
 reach the peers ``bundle_wait`` s later.
 
 The budget is a token bucket over the payload and key bytes of everything this robot puts on
@@ -129,7 +129,8 @@ class Outbox:
             return len(self._heap) + self._sending
 
     def flush(self, timeout: float) -> bool:
-        """Wait until everything queued is sent (True) or ``timeout`` s pass."""
+        """Send what waits, holding nothing back from now on, and wait until it is sent
+        (True) or ``timeout`` s pass."""
         self.release()
         deadline = time.monotonic() + timeout
         while self.pending() and time.monotonic() < deadline and not self._stop.is_set():
