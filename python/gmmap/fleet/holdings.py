@@ -146,6 +146,11 @@ class Holdings:
         with self._lock:
             return {peer: dict(a.held) for peer, a in self._peers.items()}
 
+    def states(self) -> dict[str, str]:
+        """The state each peer's latest advert told."""
+        with self._lock:
+            return {peer: a.state for peer, a in self._peers.items()}
+
     def is_news(
         self, mine: Mapping[str, int], told: Mapping[str, int], state: str, present: Iterable[str]
     ) -> bool:

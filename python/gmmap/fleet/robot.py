@@ -21,7 +21,9 @@ Stages, each a thread:
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
   reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
-  between (`Transport.answers_for`), even while it maps. Robots that meet fresh send neither.
+  between (`Transport.answers_for`), even while it maps (`gmmap.fleet.fetching`: while it
+  maps it also asks them for the newest of a robot that fell quiet). Robots that meet fresh
+  send neither.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -34,14 +36,12 @@ the store, so a restart recovers it), joins the stages, and closes the transport
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import queue
 import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from gmmap.config import Config
@@ -52,6 +52,7 @@ from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
 from gmmap.fleet.events import Arrived, Built, BuiltCallback, sizes_of
+from gmmap.fleet.fetching import Fetching
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of
 from gmmap.fleet.reload import reload
@@ -71,7 +72,7 @@ META_FRAMES = "frames_consumed"
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
-class RobotNode:
+class RobotNode(Fetching):
     """One robot: ``start()``, feed it with ``run(frames)`` (or ``start_frames``), ``stop()``.
 
     ``config.robot`` names it, its fleet and its store; ``config.transport`` its endpoints;
@@ -341,50 +342,6 @@ class RobotNode:
         held = self._held() if not self.stopping else {}
         if any(held.values()) and self._told_at < joined + holdings.SETTLE_S / 2:
             self._advertise(held, self._state)
-
-    def _fetcher(self) -> None:
-        while not self.stopping:
-            items = [self.fetch_queue.get()]
-            # One round serves every request queued meanwhile.
-            with contextlib.suppress(queue.Empty):
-                while True:
-                    items.append(self.fetch_queue.get_nowait())
-            if None in items:
-                return
-            wanted = {r for i in items for r in i}
-            try:
-                self._fetch(wanted - {self.robot})
-            except Exception:
-                log.exception("%s: fetching %s failed", self.robot, sorted(wanted))
-
-    def _fetch(self, robots: set[str]) -> None:
-        # All robots' queries at once: a peer behind a stalled link holds each query until
-        # its timeout, and a meeting with the robot in between may end meanwhile.
-        with ThreadPoolExecutor(max(1, len(robots))) as pool:
-            list(pool.map(self._fetch_one, sorted(robots)))
-
-    def _fetch_one(self, r: str) -> None:
-        if self.stopping:
-            return
-        since = self.arrivals.since(r, self.store.seqs(r))
-        # The adverts count what is stored; what is still queued here counts as arrived.
-        if since >= max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0):
-            return
-        relay = self.arrivals.relayed(r, self.transport.peers())
-        got = self.transport.fetch(r, KIND, since, relay=relay)
-        if not got and not relay:  # its link to us stalled: at once through those in between
-            self.arrivals.unanswered(r)
-            got = self.transport.fetch(r, KIND, since, relay=True)
-        for seq, payload in got:
-            self._enqueue_fetched(r, seq, payload)
-
-    def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
-        # A relay's reply too must carry the owner's seal.
-        if not self.door.admit(robot, KIND, seq, payload) or not self.arrivals.add(robot, seq):
-            return
-        with self._lock:  # fetches of several robots run at once
-            self.counts["fetched"] += 1
-        self._enqueue(Arrived("fetched", robot, seq, payload))
 
     def _matching(self) -> None:
         try:

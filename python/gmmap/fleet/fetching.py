@@ -1,0 +1,98 @@
+"""A robot node's fetch stage (`gmmap.fleet.robot.RobotNode`): what it asks its peers for.
+
+A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fleet.arrivals`):
+
+- when an advert (`gmmap.fleet.holdings`) says a peer holds more of a robot than we do;
+- while we map, every `holdings.FETCH_EVERY_S`, for each present robot still mapping that
+  sent us nothing for a while although another robot did (`Fetching._stalled`). A rendezvous
+  link that went down stays "present" until Zenoh's lease ends, and the robot we hear may
+  hold that robot's newest submaps: it maps too, so no advert of its tells us.
+
+The owner answers for its own submaps while we hear it. Where it leaves a query unanswered, or
+is quiet, the robots in between answer (``relay``), oldest first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+from concurrent.futures import ThreadPoolExecutor
+
+from gmmap.fleet import holdings
+from gmmap.fleet.events import Arrived
+from gmmap.fleet.transport import DEFAULT_KIND
+
+log = logging.getLogger(__name__)
+
+KIND = DEFAULT_KIND
+
+
+class Fetching:
+    """The fetch thread of `RobotNode`, a mixin: it uses the node's ``robot``, ``store``,
+    ``transport``, ``arrivals``, ``holdings``, ``door``, ``fetch_queue``, ``counts``,
+    ``_lock``, ``_state``, ``stopping`` and ``_enqueue``."""
+
+    def _fetcher(self) -> None:
+        while not self.stopping:
+            try:
+                items = [self.fetch_queue.get(timeout=holdings.FETCH_EVERY_S)]
+            except queue.Empty:
+                self._fetch(set(self._stalled()), probe=True)
+                continue
+            # One round serves every request queued meanwhile.
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    items.append(self.fetch_queue.get_nowait())
+            if None in items:
+                return
+            self._fetch({r for i in items for r in i})
+
+    def _fetch(self, robots: set[str], probe: bool = False) -> None:
+        robots -= {self.robot}
+        # All at once: a stalled link holds a query until its timeout, and a meeting may end.
+        try:
+            with ThreadPoolExecutor(max(1, len(robots))) as pool:
+                list(pool.map(lambda r: self._fetch_one(r, probe), sorted(robots)))
+        except Exception:
+            log.exception("%s: fetching %s failed", self.robot, sorted(robots))
+
+    def _fetch_one(self, r: str, probe: bool) -> None:
+        if self.stopping:
+            return
+        since = self.arrivals.since(r, self.store.seqs(r))
+        # The adverts count what is stored; what is still queued here counts as arrived.
+        told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
+        if since >= told and not probe:
+            return
+        relay = probe or self.arrivals.relayed(r, self.transport.peers())
+        got = self.transport.fetch(r, KIND, since, relay=relay)
+        if not got and not relay:  # its link to us stalled: at once through those in between
+            self.arrivals.unanswered(r)
+            got = self.transport.fetch(r, KIND, since, relay=True)
+        for seq, payload in got:
+            self._enqueue_fetched(r, seq, payload)
+
+    def _stalled(self) -> list[str]:
+        """While we map: the present robots still mapping, of which we hold something, that
+        sent us nothing for a while although another present robot did."""
+        if self._state != holdings.MAPPING or self.stopping:
+            return []
+        present = self.transport.peers()
+        quiet = [r for r in present if self.arrivals.relayed(r, present)]
+        if len(quiet) == len(present):  # we hear no one: no robot in between to ask
+            return []
+        told = self.holdings.states()
+        return [
+            r
+            for r in quiet
+            if told.get(r, holdings.MAPPING) == holdings.MAPPING and self.store.count(r, KIND)
+        ]
+
+    def _enqueue_fetched(self, robot: str, seq: int, payload: bytes) -> None:
+        # A relay's reply too must carry the owner's seal.
+        if not self.door.admit(robot, KIND, seq, payload) or not self.arrivals.add(robot, seq):
+            return
+        with self._lock:  # fetches of several robots run at once
+            self.counts["fetched"] += 1
+        self._enqueue(Arrived("fetched", robot, seq, payload))

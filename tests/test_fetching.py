@@ -1,0 +1,52 @@
+"""The fetch stage (`gmmap.fleet.fetching`): which quiet robots a mapping robot asks the
+robots in between about, and how."""
+
+import threading
+from types import SimpleNamespace
+
+from gmmap.fleet.fetching import Fetching
+from gmmap.fleet.holdings import LINGER, MAPPING
+
+
+class Node(Fetching):
+    """A robot "a" whose peers ``present`` are, of which ``quiet`` sent nothing of late."""
+
+    def __init__(self, present, quiet, states=None, held=None, state=MAPPING):
+        self.robot, self.stopping, self._state = "a", False, state
+        self._lock, self.counts = threading.Lock(), {"fetched": 0}
+        self.asked: list[tuple] = []
+        self.transport = SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer)
+        self.arrivals = SimpleNamespace(
+            relayed=lambda r, p: r in quiet, since=lambda r, seqs: len(seqs), add=lambda r, s: True
+        )
+        self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: {})
+        held = {"b": 3, "c": 3} if held is None else held
+        self.store = SimpleNamespace(
+            count=lambda r, kind: held.get(r, 0), seqs=lambda r: list(range(held.get(r, 0)))
+        )
+
+    def _fetch_answer(self, robot, kind, since, relay=False):
+        self.asked.append((robot, since, relay))
+        return []
+
+
+def test_a_quiet_robot_is_asked_about_while_another_is_heard() -> None:
+    assert Node(["b", "c"], quiet={"b"})._stalled() == ["b"]
+
+
+def test_nothing_is_asked_when_no_one_is_heard_or_we_do_not_map() -> None:
+    assert Node(["b", "c"], quiet={"b", "c"})._stalled() == []  # no robot in between
+    assert Node(["b", "c"], quiet={"b"}, state=LINGER)._stalled() == []  # adverts do it then
+
+
+def test_a_lingering_robot_or_one_never_heard_is_not_asked_about() -> None:
+    assert Node(["b", "c"], quiet={"b"}, states={"b": LINGER})._stalled() == []
+    assert Node(["b", "c"], quiet={"b"}, held={"c": 2})._stalled() == []
+
+
+def test_a_probe_asks_the_robots_in_between_without_an_advert() -> None:
+    node = Node(["b", "c"], quiet={"b"})
+    node._fetch({"b"})  # no advert says anyone holds more: no query
+    assert node.asked == []
+    node._fetch(set(node._stalled()), probe=True)
+    assert node.asked == [("b", 3, True)]  # from its first gap, every holder answering
