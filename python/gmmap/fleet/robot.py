@@ -52,7 +52,7 @@ from gmmap.fleet.codec import decode, encode
 from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
 from gmmap.fleet.events import Arrived, Built, BuiltCallback, sizes_of
-from gmmap.fleet.fetching import Fetching
+from gmmap.fleet.fetching import KIND, Fetching
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of
 from gmmap.fleet.reload import reload
@@ -67,7 +67,6 @@ __all__ = ["Arrived", "Built", "RobotNode"]
 
 log = logging.getLogger(__name__)
 
-KIND = "submap"
 META_FRAMES = "frames_consumed"
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
@@ -132,8 +131,12 @@ class RobotNode(Fetching):
         t.on_join(self._joined)
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
-        stages = (self._keeping, self._matching, self._optimisation, self._fetcher)
-        for name, target in zip(("keep", "match", "optimise", "fetch"), stages, strict=True):
+        for name, target in (
+            ("keep", self._keeping),
+            ("match", self._matching),
+            ("optimise", self._optimisation),
+            ("fetch", self._fetcher),
+        ):
             self._spawn(name, target)
 
     def _serve(self) -> None:
