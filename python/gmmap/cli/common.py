@@ -187,7 +187,8 @@ BUDGET = setting(
 BUNDLE = setting(
     "--bundle",
     "robot.bundle",
-    "Own submaps sent together (fewer packets; each waits up to robot.bundle_wait s).",
+    "Own submaps sent together, each waiting up to robot.bundle_wait s (unset: 3, or 1 on "
+    "the demo's rendezvous links).",
     type=click.IntRange(min=1),
 )
 DESCRIPTOR = setting(
