@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,6 +65,12 @@ def robot(name: str, config, report, roscore, *extra) -> subprocess.Popen:
     )  # fmt: skip
 
 
+def play(bag: Path, env: dict) -> None:
+    """``rosbag play``, a second after advertising for the node's subscribers to connect to
+    every topic: an image that came before its CameraInfo connection was up is dropped."""
+    subprocess.run(["rosbag", "play", "-q", "-d", "1", str(bag)], env=env, check=True, timeout=60)
+
+
 def subscribed(topics) -> bool:
     """Whether the ROS master has a subscriber to each of ``topics``."""
     state = __import__("rosgraph").Master("/gmmap_test").getSystemState()[1]
@@ -91,7 +98,7 @@ def test_the_ros1_node_maps_a_played_bag_and_publishes_map_tf_and_status(tmp_pat
     ]
     try:
         assert wait(lambda: subscribed(["/camera/depth/points"]), 30), "the node did not subscribe"
-        subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
+        play(bag, roscore)
         mapped = lambda: "status" in heard and json.loads(heard["status"])["live"]["mapped"] == 8  # noqa: E731
         assert wait(mapped, 60), heard.get("status")
         assert wait(lambda: "map" in heard and len(heard["map"].markers) > 0, 30)
@@ -139,7 +146,7 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
     try:
         topics = ["/a/camera/depth/points", "/b/camera/depth/points"]
         assert wait(lambda: subscribed(topics), 30), "the nodes did not subscribe"
-        subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
+        play(bag, roscore)
         assert wait(lambda: ("a/map", "b/map") in edges, 60), edges
         time.sleep(1.5)  # both nodes have published their tree by now
         assert set(edges) == {("a/map", "b/map")}  # one tree: the reference's map above b's
@@ -183,7 +190,7 @@ def test_the_ros1_node_maps_depth_images_posed_by_a_tf_chain(tmp_path, roscore):
     sub = rospy.Subscriber("/gmmap/status", String, lambda m: heard.__setitem__("s", m.data))
     try:
         assert wait(lambda: subscribed(["/camera/depth/image", "/tf_static"]), 30)
-        subprocess.run(["rosbag", "play", "-q", str(bag)], env=roscore, check=True, timeout=60)
+        play(bag, roscore)
         mapped = lambda: "s" in heard and json.loads(heard["s"])["live"]["mapped"] == 8  # noqa: E731
         assert wait(mapped, 60), heard.get("s")
     finally:
