@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from conftest import wait
 from gmmap.cli.demo import rendezvous
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
@@ -224,15 +225,6 @@ def test_a_bundle_shares_packets_and_segments_are_ethernet_sized() -> None:
     assert separate >= 8  # each message its packet and an ACK
     assert bundled < separate
     assert big >= 5  # 6,000 B in 1,448-byte segments, and at least one ACK
-
-
-def wait(cond, timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
 
 
 def _demo(tmp_path: Path, robots: int, *flags: str, timeout: float) -> tuple:

@@ -5,6 +5,7 @@ import time
 
 import pytest
 
+from conftest import wait
 from gmmap.errors import InvalidInputError, TransportError
 from gmmap.fleet.keys import data_key
 from gmmap.fleet.outbox import Budget, Outbox
@@ -88,7 +89,7 @@ def test_submaps_wait_until_a_bundle_is_full_then_leave_together() -> None:
     time.sleep(0.3)
     assert sent == [] and box.pending() == 2
     box.put("submap", 2, b"x")
-    assert wait_for(lambda: len(sent) == 3)
+    assert wait(lambda: len(sent) == 3)
     assert [s[1] for s in sent] == [2, 1, 0]  # newest first, back to back
     assert sent[-1][2] - sent[0][2] < 0.1
     box.close()
@@ -98,7 +99,7 @@ def test_a_bundle_leaves_when_its_oldest_has_waited_long_enough() -> None:
     box, sent = _timed_box(bundle=3, wait=0.4)
     start = time.monotonic()
     box.put("submap", 0, b"x")
-    assert wait_for(lambda: len(sent) == 1)
+    assert wait(lambda: len(sent) == 1)
     assert sent[0][2] - start >= 0.35
 
 
@@ -113,7 +114,7 @@ def test_an_advert_or_the_end_of_the_frames_sends_what_waits(how: str) -> None:
         box.release()
     else:
         assert box.flush(5)
-    assert wait_for(lambda: box.pending() == 0)
+    assert wait(lambda: box.pending() == 0)
     expected = [("have", 0), ("submap", 0)] if how == "advert" else [("submap", 0)]
     assert [s[:2] for s in sent] == expected
     box.put("submap", 1, b"x")
@@ -121,17 +122,8 @@ def test_an_advert_or_the_end_of_the_frames_sends_what_waits(how: str) -> None:
         time.sleep(0.2)
         assert box.pending() == 1
     else:  # the frames ended: nothing waits any more
-        assert wait_for(lambda: len(sent) == 2)
+        assert wait(lambda: len(sent) == 2)
     box.close()
-
-
-def wait_for(cond, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5])
