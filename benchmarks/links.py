@@ -142,30 +142,17 @@ def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
 def _pair(tmp: str):
     """Two robots' transports, b reaching a through a counting relay, both serving a store
     and subscribed: (relay, a, b, messages b received)."""
-    from gmmap.fleet.keys import free_port
-    from gmmap.fleet.links import ZENOH_NO_GOSSIP, Relay
+    from gmmap.fleet.links import relayed_pair
     from gmmap.fleet.store import Store
-    from gmmap.fleet.transport import Transport, TransportConfig
-    from gmmap.options import TransportOptions
 
-    port = free_port()
     got: list[int] = []
-    with Relay(("127.0.0.1", port)) as relay:
-        a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
-        b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
-        with (
-            Store(Path(tmp) / "a.db") as store,
-            Transport(TransportConfig("idle", "a", a_opts)) as a,
-            Transport(TransportConfig("idle", "b", b_opts)) as b,
-        ):
-            for t in (a, b):
-                t.serve(store.fetch_provider, store.robots)
-            a.subscribe(lambda *_: None)
-            b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
-            if not b.wait_for_peers(["a"], 10):
-                raise RuntimeError("the robots did not meet")
-            time.sleep(2.0)  # declarations settle
-            yield relay, a, b, got
+    with Store(Path(tmp) / "a.db") as store, relayed_pair("idle") as (relay, a, b):
+        for t in (a, b):
+            t.serve(store.fetch_provider, store.robots)
+        a.subscribe(lambda *_: None)
+        b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
+        time.sleep(2.0)  # declarations settle
+        yield relay, a, b, got
 
 
 def _wire(relay, before) -> dict[str, int]:

@@ -21,7 +21,14 @@ from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.fleetplots import completeness
 from gmmap.fleet.keys import free_port
-from gmmap.fleet.links import HEADER_BYTES, ZENOH_NO_GOSSIP, LinkOptions, Relay, Rendezvous
+from gmmap.fleet.links import (
+    HEADER_BYTES,
+    ZENOH_NO_GOSSIP,
+    LinkOptions,
+    Relay,
+    Rendezvous,
+    relayed_pair,
+)
 from gmmap.fleet.store import Store
 
 
@@ -189,38 +196,27 @@ def test_a_bundle_shares_packets_and_segments_are_ethernet_sized() -> None:
     """Messages put back to back leave in one Zenoh batch: fewer packets than the same
     messages apart. And the relay's sockets offer Ethernet's segment size, so a message
     over 1,448 B is counted as the several packets it would be on a radio link."""
-    from gmmap.fleet.transport import Transport, TransportConfig
-    from gmmap.options import TransportOptions
-
-    port = free_port()
     got: list[int] = []
-    with Relay(("127.0.0.1", port)) as relay:
-        a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
-        b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
-        with (
-            Transport(TransportConfig("f", "a", a_opts)) as a,
-            Transport(TransportConfig("f", "b", b_opts)) as b,
-        ):
-            b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
-            assert b.wait_for_peers(["a"], 10) and a.wait_for_peers(["b"], 10)
-            time.sleep(0.5)  # the subscription reaches a
+    with relayed_pair() as (relay, a, b):
+        b.subscribe(lambda robot, kind, seq, payload: got.append(seq))
+        time.sleep(0.5)  # the subscription reaches a
 
-            def packets(send) -> int:
-                before, n = relay.counts(), len(got)
-                send()
-                assert wait(lambda: len(got) > n)
-                time.sleep(0.3)  # the ACKs
-                after = relay.counts()
-                return sum(after[d].packets - before[d].packets for d in after)
+        def packets(send) -> int:
+            before, n = relay.counts(), len(got)
+            send()
+            assert wait(lambda: len(got) > n)
+            time.sleep(0.3)  # the ACKs
+            after = relay.counts()
+            return sum(after[d].packets - before[d].packets for d in after)
 
-            def apart() -> None:
-                for seq in range(4):
-                    a.publish("submap", seq, bytes(750))
-                    time.sleep(0.2)
+        def apart() -> None:
+            for seq in range(4):
+                a.publish("submap", seq, bytes(750))
+                time.sleep(0.2)
 
-            bundled = packets(lambda: [a.publish("submap", 10 + s, bytes(750)) for s in range(4)])
-            separate = packets(apart)
-            big = packets(lambda: a.publish("submap", 20, bytes(6000)))
+        bundled = packets(lambda: [a.publish("submap", 10 + s, bytes(750)) for s in range(4)])
+        separate = packets(apart)
+        big = packets(lambda: a.publish("submap", 20, bytes(6000)))
     assert sorted(got)[:4] == [0, 1, 2, 3] and len(got) == 9
     assert separate >= 8  # each message its packet and an ACK
     assert bundled < separate

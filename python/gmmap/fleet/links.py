@@ -295,6 +295,29 @@ class Relay:
                 return
 
 
+@contextlib.contextmanager
+def relayed_pair(fleet: str = "pair", timeout: float = 10.0):
+    """Two robots' transports, ``a`` listening and ``b`` reaching it only through a counting
+    `Relay` (gossip off), once each sees the other: yields (relay, a, b). For tests and
+    benchmarks of what one link carries."""
+    from gmmap.errors import TransportError
+    from gmmap.fleet.keys import free_port
+    from gmmap.fleet.transport import Transport, TransportConfig
+    from gmmap.options import TransportOptions
+
+    port = free_port()
+    with Relay(("127.0.0.1", port)) as relay:
+        a_opts = TransportOptions(port=port, zenoh_options=ZENOH_NO_GOSSIP)
+        b_opts = TransportOptions(connect=(relay.endpoint,), zenoh_options=ZENOH_NO_GOSSIP)
+        with (
+            Transport(TransportConfig(fleet, "a", a_opts)) as a,
+            Transport(TransportConfig(fleet, "b", b_opts)) as b,
+        ):
+            if not (b.wait_for_peers(["a"], timeout) and a.wait_for_peers(["b"], timeout)):
+                raise TransportError("the two robots did not meet through the relay")
+            yield relay, a, b
+
+
 Sight = Callable[[np.ndarray, np.ndarray], bool]
 
 
