@@ -12,7 +12,7 @@ from gmmap.options import RobotOptions
 
 # A present robot that has sent nothing directly for this long, while others hold more of it,
 # is fetched through them: a rendezvous link that went down stays "present" until Zenoh's
-# lease expires (30 s), and a short meeting with a robot in between would pass unused.
+# lease expires (60 s), and a short meeting with a robot in between would pass unused.
 QUIET_S = 5.0
 
 

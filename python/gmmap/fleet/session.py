@@ -1,12 +1,14 @@
 """Opening the fleet transport's Zenoh session (`gmmap.fleet.transport`): the Zenoh configuration
 from `TransportOptions`, and the endpoint to listen on.
 
-The lease is 30 s, not Zenoh's 10 s, with a keep-alive every 15 s (lease / 2, not Zenoh's
-lease / 4) when a session has nothing else to send: on a 500 B/s link Zenoh's defaults would
-take a fifth of it, and each keep-alive costs two packets (docs/benchmarks.md, the idle link).
-Two per lease still let one be late. An outage shorter than the lease is a stall the link
-resumes from, not a reconnection with its handshake and declarations; a robot that died
-silently is seen gone after 30 s, and a robot waits for such a peer anyway
+The lease is 60 s, not Zenoh's 10 s, with a keep-alive every 15 s (lease / 4, as Zenoh's) when a
+session has nothing else to send: on a 500 B/s link Zenoh's defaults would take a fifth of it, and
+each keep-alive costs two packets (docs/benchmarks.md, the idle link). An outage shorter than the
+lease is a stall the link resumes from, not a reconnection: a new session costs its handshakes and
+declarations (about 2.4 kB), and what was in flight when the old one ended crosses again. With a 30
+s lease each 30 s partition of benchmarks/links.py ended the sessions: 1,800-2,000 B per delivered
+submap there, against about 1,000 B with 60 s. The price is that a robot that died silently (power
+lost, out of range for good) is seen gone only after 60 s, and a robot waits for such a peer anyway
 (`gmmap.fleet.holdings`). ``transport.zenoh_options`` can set another.
 """
 
@@ -22,7 +24,7 @@ from gmmap.fleet.access import acl, tls_entries
 from gmmap.fleet.keys import free_port
 from gmmap.options import TransportOptions
 
-LEASE = {"transport/link/tx/lease": 30_000, "transport/link/tx/keep_alive": 2}  # ms; per lease
+LEASE = {"transport/link/tx/lease": 60_000, "transport/link/tx/keep_alive": 4}  # ms; per lease
 
 
 def zenoh_config(
