@@ -5,11 +5,11 @@ The lease is 60 s, not Zenoh's 10 s, with a keep-alive every 15 s (lease / 4, as
 session has nothing else to send: on a 500 B/s link Zenoh's defaults would take a fifth of it, and
 each keep-alive costs two packets (docs/benchmarks.md, the idle link). An outage shorter than the
 lease is a stall the link resumes from, not a reconnection: a new session costs its handshakes and
-declarations (about 2.4 kB), and what was in flight when the old one ended crosses again. With a 30
-s lease each 30 s partition of benchmarks/links.py ended the sessions: 1,800-2,000 B per delivered
-submap there, against about 1,000 B with 60 s. The price is that a robot that died silently (power
-lost, out of range for good) is seen gone only after 60 s, and a robot waits for such a peer anyway
-(`gmmap.fleet.holdings`). ``transport.zenoh_options`` can set another.
+declarations (about 2.4 kB), and what was in flight when the old one ended crosses again. With a
+30 s lease each 30 s partition of benchmarks/links.py ended the sessions: 1,800-2,000 B per
+delivered submap there, against about 1,000 B with 60 s. The price is that a robot that died
+silently (power lost, out of range for good) is seen gone only after 60 s, and a robot waits for
+such a peer anyway (`gmmap.fleet.holdings`). ``transport.zenoh_options`` can set another.
 """
 
 from __future__ import annotations
