@@ -17,7 +17,11 @@ class Node(Fetching):
         self.asked: list[tuple] = []
         self.transport = SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer)
         self.arrivals = SimpleNamespace(
-            relayed=lambda r, p: r in quiet, since=lambda r, seqs: len(seqs), add=lambda r, s: True
+            relayed=lambda r, p: r in quiet,
+            since=lambda r, seqs: len(seqs),
+            add=lambda r, s: True,
+            now=lambda: 0.0,
+            on_its_way=lambda r, since: False,
         )
         self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: {})
         held = {"b": 3, "c": 3} if held is None else held

@@ -33,12 +33,14 @@ class Arrivals:
         self._seqs: dict[str, set[int]] = {}
         self._silent: set[str] = set()
         self._heard: dict[str, float] = {}  # when it joined or last sent us something itself
+        self._latest: dict[str, int] = {}  # the newest seq it sent us itself since it joined
         self._clock, self._quiet_s = clock, quiet_s
 
     def met(self, robot: str) -> None:
         """``robot`` joined: its quiet time starts now."""
         with self._lock:
             self._heard[robot] = self._clock()
+            self._latest.pop(robot, None)  # what it sent before is no guide to what is on its way
 
     def add(self, robot: str, seq: int, direct: bool = False) -> bool:
         """Notes that ``robot``'s ``seq`` arrived (``direct``: from that robot itself, which is
@@ -48,6 +50,7 @@ class Arrivals:
             if direct:
                 self._silent.discard(robot)
                 self._heard[robot] = self._clock()
+                self._latest[robot] = max(seq, self._latest.get(robot, seq))
             new = seq not in seqs
             seqs.add(seq)
         return new
@@ -68,8 +71,32 @@ class Arrivals:
             quiet = self._clock() > self._heard.get(robot, -float("inf")) + self._quiet_s
             return robot not in set(present) or robot in self._silent or quiet
 
-    def unanswered(self, robot: str) -> None:
-        """``robot``, present, sent nothing of its own when asked: relays answer from now on,
-        until something of it arrives directly."""
+    def on_its_way(self, robot: str, since: int) -> bool:
+        """Whether what we lack of ``robot`` from ``since`` on is on its way from the robot
+        itself: it talks to us (sent us something directly within ``quiet_s``) and ``since``
+        lies past the newest submap it sent us since it joined. A robot sends each of its
+        submaps to every present peer in order, so on a slow link the rest is queued behind
+        that one, and fetching it would send it twice."""
         with self._lock:
+            latest = self._latest.get(robot)
+            heard = self._heard.get(robot, -float("inf"))
+            talking = robot not in self._silent and self._clock() <= heard + self._quiet_s
+            return talking and latest is not None and since > latest
+
+    @property
+    def quiet_s(self) -> float:
+        return self._quiet_s
+
+    def now(self) -> float:
+        return self._clock()
+
+    def unanswered(self, robot: str, asked: float) -> bool:
+        """``robot``, present, sent nothing of its own when asked at ``asked`` (`now`): unless
+        something of it arrived directly meanwhile (its link is slow, not down: the answer is
+        queued behind), relays answer from now on, until something of it arrives directly.
+        Whether it was so marked."""
+        with self._lock:
+            if self._heard.get(robot, -float("inf")) >= asked:
+                return False
             self._silent.add(robot)
+            return True

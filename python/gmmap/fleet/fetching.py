@@ -2,7 +2,10 @@
 
 A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fleet.arrivals`):
 
-- when an advert (`gmmap.fleet.holdings`) says a peer holds more of a robot than we do;
+- when an advert (`gmmap.fleet.holdings`) says a peer holds more of a robot than we do. Where
+  that robot talks to us and all we lack of it is newer than what it last sent us, it is
+  queued behind on a slow link (`Arrivals.on_its_way`) and a fetch would send it twice: we
+  ask again once the robot could have fallen quiet, and only if it still lacks;
 - while we map, every `holdings.FETCH_EVERY_S`, for each present robot still mapping that
   sent us nothing for a while although another robot did (`Fetching._stalled`). A rendezvous
   link that went down stays "present" until Zenoh's lease ends, and the robot we hear may
@@ -17,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import queue
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from gmmap.fleet import holdings
@@ -65,13 +69,29 @@ class Fetching:
         told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
         if since >= told and not probe:
             return
+        if not probe and self.arrivals.on_its_way(r, since):
+            self._later(r)  # a peer with a faster link to r told us: r's own sends follow
+            return
         relay = probe or self.arrivals.relayed(r, self.transport.peers())
+        asked = self.arrivals.now()
         got = self.transport.fetch(r, KIND, since, relay=relay)
-        if not got and not relay:  # its link to us stalled: at once through those in between
-            self.arrivals.unanswered(r)
+        if not got and not relay and self.arrivals.unanswered(r, asked):
+            # Its link to us stalled: at once through those in between.
             got = self.transport.fetch(r, KIND, since, relay=True)
         for seq, payload in got:
             self._enqueue_fetched(r, seq, payload)
+
+    def _later(self, r: str) -> None:
+        """Asks about ``r`` again once it could have fallen quiet: if what it sends has not
+        come by then, its link went down, and the robots in between answer."""
+
+        def again() -> None:
+            if not self.stopping:
+                self.fetch_queue.put((r,))
+
+        timer = threading.Timer(self.arrivals.quiet_s, again)
+        timer.daemon = True
+        timer.start()
 
     def _stalled(self) -> list[str]:
         """While we map: the present robots still mapping, of which we hold something, that
