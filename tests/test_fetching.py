@@ -54,3 +54,19 @@ def test_a_probe_asks_the_robots_in_between_without_an_advert() -> None:
     assert node.asked == []
     node._fetch(set(node._stalled()), probe=True)
     assert node.asked == [("b", 3, True)]  # from its first gap, every holder answering
+
+
+def test_own_submaps_waiting_for_their_bundle_leave_now_not_in_the_answer() -> None:
+    from gmmap.fleet import linkstats
+
+    asked_now: list[bool] = []
+    node = SimpleNamespace(
+        robot="a",
+        store=SimpleNamespace(fetch_provider=lambda r, k, since: [(0, b"0"), (1, b"1"), (2, b"2")]),
+        outbox=SimpleNamespace(held=lambda kind: {2}, now=lambda: asked_now.append(True)),
+    )
+    provide = linkstats.provider(node)
+    assert provide("a", "submap", 0) == [(0, b"0"), (1, b"1")]  # 2 leaves with its bundle
+    assert asked_now == [True]
+    assert provide("b", "submap", 0) == [(0, b"0"), (1, b"1"), (2, b"2")]  # not ours
+    assert asked_now == [True]

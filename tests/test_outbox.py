@@ -126,6 +126,24 @@ def test_an_advert_or_the_end_of_the_frames_sends_what_waits(how: str) -> None:
     box.close()
 
 
+def test_a_bundle_asked_for_leaves_now_and_the_next_waits_again() -> None:
+    box, sent = _timed_box(bundle=3, wait=30.0)
+    box.put("submap", 0, b"x")
+    box.put("submap", 1, b"x")
+    box.put("have", 0, b"{}")  # an advert goes first, and sends what waits
+    assert wait(lambda: box.pending() == 0)
+    box.put("submap", 2, b"x")
+    box.put("submap", 3, b"x")
+    assert box.held("submap") == {2, 3} and box.held("have") == set()
+    box.now()  # a peer's fetch asked for them
+    assert wait(lambda: box.pending() == 0)
+    assert [s[1] for s in sent if s[0] == "submap"] == [1, 0, 3, 2]
+    box.put("submap", 4, b"x")
+    time.sleep(0.2)
+    assert box.held("submap") == {4}  # bundling again
+    box.close()
+
+
 @pytest.mark.parametrize("bad", [0, -1, 1.5])
 def test_a_bad_bundle_is_refused(bad) -> None:
     with pytest.raises(InvalidInputError):

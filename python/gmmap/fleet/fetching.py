@@ -5,7 +5,8 @@ A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fl
 - when an advert (`gmmap.fleet.holdings`) says a peer holds more of a robot than we do. Where
   that robot talks to us and all we lack of it is newer than what it last sent us, it is
   queued behind on a slow link (`Arrivals.on_its_way`) and a fetch would send it twice: we
-  ask again once the robot could have fallen quiet, and only if it still lacks;
+  ask again once the robot could have fallen quiet, and only if we still lack it. Before
+  asking the robot itself we wait `LANDING_S`: what it sent the peer may be landing here too;
 - while we map, every `holdings.FETCH_EVERY_S`, for each present robot still mapping that
   sent us nothing for a while although another robot did (`Fetching._stalled`). A rendezvous
   link that went down stays "present" until Zenoh's lease ends, and the robot we hear may
@@ -21,6 +22,7 @@ import contextlib
 import logging
 import queue
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 from gmmap.fleet import holdings
@@ -30,6 +32,9 @@ from gmmap.fleet.transport import DEFAULT_KIND
 log = logging.getLogger(__name__)
 
 KIND = DEFAULT_KIND
+# Before asking a robot for what a peer's advert says it lacks: the robot sent it to every
+# peer at once, and under load or on a slower link it lands here a moment after there.
+LANDING_S = 1.0
 
 
 class Fetching:
@@ -64,15 +69,18 @@ class Fetching:
     def _fetch_one(self, r: str, probe: bool) -> None:
         if self.stopping:
             return
-        since = self.arrivals.since(r, self.store.seqs(r))
-        # The adverts count what is stored; what is still queued here counts as arrived.
-        told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
+        since, told = self._lacking(r)
         if since >= told and not probe:
             return
         if not probe and self.arrivals.on_its_way(r, since):
             self._later(r)  # a peer with a faster link to r told us: r's own sends follow
             return
         relay = probe or self.arrivals.relayed(r, self.transport.peers())
+        if not relay:  # what r sent the peer that told us may be landing here too
+            time.sleep(LANDING_S)
+            since, told = self._lacking(r)
+            if since >= told:
+                return
         asked = self.arrivals.now()
         got = self.transport.fetch(r, KIND, since, relay=relay)
         if not got and not relay and self.arrivals.unanswered(r, asked):
@@ -80,6 +88,13 @@ class Fetching:
             got = self.transport.fetch(r, KIND, since, relay=True)
         for seq, payload in got:
             self._enqueue_fetched(r, seq, payload)
+
+    def _lacking(self, r: str) -> tuple[int, int]:
+        """Where a fetch of ``r`` starts, and how many of it the adverts say a peer holds."""
+        since = self.arrivals.since(r, self.store.seqs(r))
+        # The adverts count what is stored; what is still queued here counts as arrived.
+        told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
+        return since, told
 
     def _later(self, r: str) -> None:
         """Asks about ``r`` again once it could have fallen quiet: if what it sends has not

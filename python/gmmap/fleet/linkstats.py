@@ -52,12 +52,16 @@ def decode(payload: bytes) -> dict | None:
 
 def provider(node) -> Callable[[str, str, int], list[tuple[int, bytes]]]:
     """``node``'s fetch provider (`Transport.serve`): its store's, and for ``links`` of its own
-    its counts now."""
+    its counts now. Its own submaps still waiting in its outbox for their bundle leave now, to
+    every peer, instead of in the answer: else they would cross twice."""
     store = node.store.fetch_provider
 
     def provide(robot: str, kind: str, since: int) -> list[tuple[int, bytes]]:
         if kind != KIND:
-            return store(robot, kind, since)
+            held = node.outbox.held(kind) if robot == node.robot else set()
+            if held:
+                node.outbox.now()
+            return [(seq, p) for seq, p in store(robot, kind, since) if seq not in held]
         if robot != node.robot:
             return []
         seq = time.time_ns() // 1_000_000

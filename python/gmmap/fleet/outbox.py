@@ -115,6 +115,18 @@ class Outbox:
             self._bundle = 1
             self._cond.notify()
 
+    def held(self, kind: str) -> set[int]:
+        """The seqs of ``kind`` waiting here, not yet being sent."""
+        with self._cond:
+            return {seq for _, k, seq, _ in self._heap if k == kind}
+
+    def now(self) -> None:
+        """Send what waits now (a peer asked for it), bundling again afterwards."""
+        with self._cond:
+            if self._heap:
+                self._open = True
+                self._cond.notify()
+
     def _due(self) -> float:
         """Seconds until what waits may leave (0: now; inf: nothing waits). Called locked."""
         if not self._heap:
