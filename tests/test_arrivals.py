@@ -61,3 +61,10 @@ def test_what_a_talking_robot_sent_after_its_latest_is_on_its_way() -> None:
     a.add("r", 2, direct=True)
     a.met("r")  # joined again: what it sent meanwhile never came
     assert not a.on_its_way("r", 3)
+
+
+def test_nothing_is_on_its_way_where_robots_do_not_bundle() -> None:
+    a = Arrivals(patient=False)  # links that come and go: a quiet gap more likely a cut link
+    a.met("r")
+    a.add("r", 0, direct=True)
+    assert not a.on_its_way("r", 1)

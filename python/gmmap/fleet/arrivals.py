@@ -28,13 +28,19 @@ class Arrivals:
     answer a fetch for their own submaps or have been quiet (thread-safe: Zenoh's threads and
     the fetcher). Times are ``clock()`` seconds."""
 
-    def __init__(self, clock=time.monotonic, quiet_s: float = QUIET_S) -> None:
+    def __init__(
+        self, clock=time.monotonic, quiet_s: float = QUIET_S, patient: bool = True
+    ) -> None:
         self._lock = threading.Lock()
         self._seqs: dict[str, set[int]] = {}
         self._silent: set[str] = set()
         self._heard: dict[str, float] = {}  # when it joined or last sent us something itself
         self._latest: dict[str, int] = {}  # the newest seq it sent us itself since it joined
         self._clock, self._quiet_s = clock, quiet_s
+        # Whether a gap behind the latest arrival is more likely queued than cut off: where
+        # robots bundle (stable links, `RobotOptions.bundle`), not where each submap leaves at
+        # once because a contact may last a second.
+        self.patient = patient
 
     def met(self, robot: str) -> None:
         """``robot`` joined: its quiet time starts now."""
@@ -76,12 +82,13 @@ class Arrivals:
         itself: it talks to us (sent us something directly within ``quiet_s``) and ``since``
         lies past the newest submap it sent us since it joined. A robot sends each of its
         submaps to every present peer in order, so on a slow link the rest is queued behind
-        that one, and fetching it would send it twice."""
+        that one, and fetching it would send it twice. Never where not ``patient``: there a
+        robot that sent nothing newer more likely went out of reach."""
         with self._lock:
             latest = self._latest.get(robot)
             heard = self._heard.get(robot, -float("inf"))
             talking = robot not in self._silent and self._clock() <= heard + self._quiet_s
-            return talking and latest is not None and since > latest
+            return self.patient and talking and latest is not None and since > latest
 
     @property
     def quiet_s(self) -> float:

@@ -6,7 +6,9 @@ A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fl
   that robot talks to us and all we lack of it is newer than what it last sent us, it is
   queued behind on a slow link (`Arrivals.on_its_way`) and a fetch would send it twice: we
   ask again once the robot could have fallen quiet, and only if we still lack it. Before
-  asking the robot itself we wait `LANDING_S`: what it sent the peer may be landing here too;
+  asking the robot itself we wait `LANDING_S`: what it sent the peer may be landing here too.
+  Both only where robots bundle (`Arrivals.patient`): on links that come and go a robot that
+  sent nothing newer more likely went out of reach, and a meeting may last a second;
 - while we map, every `holdings.FETCH_EVERY_S`, for each present robot still mapping that
   sent us nothing for a while although another robot did (`Fetching._stalled`). A rendezvous
   link that went down stays "present" until Zenoh's lease ends, and the robot we hear may
@@ -76,7 +78,7 @@ class Fetching:
             self._later(r)  # a peer with a faster link to r told us: r's own sends follow
             return
         relay = probe or self.arrivals.relayed(r, self.transport.peers())
-        if not relay:  # what r sent the peer that told us may be landing here too
+        if not relay and self.arrivals.patient:  # what r sent the peer may be landing here
             time.sleep(LANDING_S)
             since, told = self._lacking(r)
             if since >= told:

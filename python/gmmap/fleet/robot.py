@@ -99,7 +99,8 @@ class RobotNode(Fetching):
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
-        self.arrivals = Arrivals(quiet_s=quiet_for(config.robot))  # where fetches start
+        bundled = config.robot.bundle_size > 1
+        self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
