@@ -46,6 +46,7 @@ import numpy as np
 from gmmap.cli.demo import backend_follows_drift, run_demo
 from gmmap.config import Config
 from gmmap.eval.fleetplots import completeness, plot_completeness
+from gmmap.eval.wire import delivered
 from gmmap.options import LinkOptions, RobotOptions, SimOptions
 
 CASES = {
@@ -101,7 +102,7 @@ def case(robots: int, name: str) -> dict:
         "wall_s": round(r["wall_s"], 1),
         "wire_bytes_per_delivered_submap": r["wire_bytes_per_delivered_submap"],
         "wire_bytes": sum(sum(link["bytes"]) for link in r["links"]),
-        "delivered": sum(r["received"].values()),
+        "delivered": delivered(reports),
         "payload_bytes_per_submap": r["bytes_per_submap"]["wire"],
         "groups": r["groups"],
         "held": {n: rep["held"] for n, rep in reports.items()},

@@ -146,9 +146,9 @@ def run_demo(
     else:  # links that come and go: lost is what a peer in reach never got
         report.update(_reach_losses(config, reach, names, out))
     if relays:
-        from gmmap.eval.wire import wire_report
+        from gmmap.eval.wire import delivered, wire_report
 
-        report.update(wire_report(relays, names, report["received"]))
+        report.update(wire_report(relays, names, delivered(reports)))
     if watcher is not None:
         report["station"] = station_summary(out, reports)
     report["out"] = str(out)

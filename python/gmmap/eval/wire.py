@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 
-def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dict:
+def wire_report(relays: dict, names: list[str], delivered: int) -> dict:
     """What the relays carried: per robot the packets it put on its links and their bytes,
     headers included (``bytes``), the payload under them (``payload_bytes``: Zenoh's framing,
     keep-alives and queries, what the relay read), the bytes it took off them; per link each
-    direction; and the bytes per submap delivered to a peer."""
+    direction; and the bytes per submap delivered to a peer (``delivered`` in all)."""
     keys = ("bytes", "packets", "payload_bytes", "received_bytes", "chunks")
     wire = {n: dict.fromkeys(keys, 0) for n in names}
     links = []
@@ -28,10 +28,15 @@ def wire_report(relays: dict, names: list[str], received: dict[str, int]) -> dic
             "bytes": [c["forward"].wire_bytes, c["backward"].wire_bytes],
             "packets": [c["forward"].packets, c["backward"].packets],
         })  # fmt: skip
-    delivered = sum(received.values())
     total = sum(sum(link["bytes"]) for link in links)
     return {
         "wire": wire,
         "links": links,
         "wire_bytes_per_delivered_submap": total / delivered if delivered else None,
     }
+
+
+def delivered(reports: dict[str, dict]) -> int:
+    """The submaps robots ended holding from others: what a restarted robot received before
+    it was killed counts, and its report's ``submaps_received`` (this process only) misses."""
+    return sum(n for name, r in reports.items() for robot, n in r["held"].items() if robot != name)
