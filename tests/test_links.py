@@ -100,6 +100,21 @@ def test_nothing_crosses_while_the_gate_is_closed(echo) -> None:
     assert back == b"ping" and elapsed >= 0.5
 
 
+def test_what_a_closed_link_never_carried_is_not_counted(echo) -> None:
+    """The relay's kernel takes in what is sent while the gate is closed; if the link never
+    opens again, none of it counts on the wire, only the handshake and the ACKs."""
+    payload = b"x" * 20_000
+    with Relay(echo, gate=lambda: False) as relay:
+        with socket.create_connection(("127.0.0.1", relay.port), timeout=5) as sock:
+            sock.sendall(payload)
+            time.sleep(0.3)
+        time.sleep(0.3)
+        counts = relay.counts()
+    forward = counts["forward"]
+    assert forward.bytes == 0
+    assert forward.wire_bytes < 20 * (HEADER_BYTES + 12) < len(payload)
+
+
 def test_rendezvous_follows_where_the_robots_are() -> None:
     """In reach within the range and, with a sight test, only where nothing is in between;
     the robots move one frame per second of the clock, and a robot past its last frame stays

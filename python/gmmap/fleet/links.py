@@ -17,7 +17,10 @@ connection negotiated it, and Ethernet (`HEADER_BYTES`). A direction is counted 
 relay receives it, as its sender segmented it: the connecting side's packets on the relay's
 accepted socket, the target's on the socket to the target. Both sockets offer Ethernet's
 segment size (``SEGMENT``), not loopback's 64 KiB, so a message over 1,448 bytes is counted
-as the several packets (and ACKs) it would be on a radio or Ethernet link.
+as the several packets (and ACKs) it would be on a radio or Ethernet link. The relay's kernel
+takes in what a sender sends while the link is down, and the relay holds it until the link
+returns; what it never passes on (the link stayed down, or the session ended) is not counted:
+a link out of reach would not have carried it.
 
 Peers in Zenoh's peer mode tell each other where they listen (gossip) and would connect
 directly, around the relay; a fleet behind relays turns gossip off
@@ -66,10 +69,16 @@ class LinkCount:
 
 @dataclass(frozen=True)
 class Received:
-    """What one TCP socket received, as the kernel counts it (``TCP_INFO``)."""
+    """What one TCP socket received, as the kernel counts it (``TCP_INFO``): its packets, the
+    payload in them and each packet's headers (``header``)."""
 
     packets: int = 0
-    wire_bytes: int = 0
+    payload: int = 0
+    header: int = HEADER_BYTES
+
+    @property
+    def wire_bytes(self) -> int:
+        return self.payload + self.packets * self.header
 
 
 def received(sock: socket.socket) -> Received:
@@ -84,7 +93,7 @@ def received(sock: socket.socket) -> Received:
     (payload,) = struct.unpack_from("Q", info, 128)  # tcpi_bytes_received
     (packets,) = struct.unpack_from("I", info, 140)  # tcpi_segs_in
     header = HEADER_BYTES + (TIMESTAMP_BYTES if info[5] & _TCPI_OPT_TIMESTAMPS else 0)
-    return Received(packets, payload + packets * header)
+    return Received(packets, payload, header)
 
 
 @dataclass
@@ -135,7 +144,7 @@ class Relay:
         self._t0 = time.monotonic()
         # Each live connection's (accepted, upstream) sockets, and what closed ones received.
         self._sockets: set[tuple[socket.socket, socket.socket]] = set()
-        self._closed = {"forward": Received(), "backward": Received()}
+        self._closed: dict[str, list[Received]] = {"forward": [], "backward": []}
 
     @property
     def port(self) -> int:
@@ -154,13 +163,22 @@ class Relay:
     def counts(self) -> dict[str, LinkCount]:
         with self._lock:
             out = {k: LinkCount(**vars(d.count)) for k, d in self._dirs.items()}
-            seen = {k: [r] for k, r in self._closed.items()}
+            seen = {k: list(r) for k, r in self._closed.items()}
             for accepted, upstream in self._sockets:
                 seen["forward"].append(received(accepted))
                 seen["backward"].append(received(upstream))
         for k, parts in seen.items():
-            out[k].packets = sum(r.packets for r in parts)
-            out[k].wire_bytes = sum(r.wire_bytes for r in parts)
+            c = out[k]
+            c.packets = sum(r.packets for r in parts)
+            c.wire_bytes = sum(r.wire_bytes for r in parts)
+            # What the relay's kernel took in while the link was down and never passed on (the
+            # link came back too late, or its session ended): a link out of reach would not
+            # have carried it, its sender's TCP would have kept it.
+            held = sum(r.payload for r in parts) - c.bytes
+            if held > 0:
+                segments = -(-held // SEGMENT)
+                c.packets -= segments
+                c.wire_bytes -= held + segments * max(r.header for r in parts)
         return out
 
     def close(self) -> None:
@@ -226,10 +244,7 @@ class Relay:
         with self._lock:
             self._sockets.discard(pair)
             for name, sock in zip(("forward", "backward"), pair, strict=True):
-                r, before = received(sock), self._closed[name]
-                self._closed[name] = Received(
-                    before.packets + r.packets, before.wire_bytes + r.wire_bytes
-                )
+                self._closed[name].append(received(sock))
         for w in (writer, up_writer):
             w.close()
         for sock in pair:
