@@ -106,3 +106,29 @@ def test_a_robot_relays_for_a_peer_that_does_not_hear_all_it_holds() -> None:
     assert not h.relaying({"a": 2, "q": 1}, ["p"])  # p hears a and q itself
     assert h.relaying({"a": 2, "r": 1}, ["p"])  # only we can hand r's on to p
     assert not h.relaying({"a": 2, "r": 1}, [])  # p is gone
+
+
+def test_news_for_a_lingering_peer_waits_for_the_robots_it_hears_to_linger() -> None:
+    """p cannot end before m's last submaps and news of them, so telling p now that we hold
+    all it holds would only be told again; once m lingers, it is news."""
+    h = Holdings()
+    told = {"a": 3, "m": 1}
+    h.update("p", encode({"a": 5, "m": 1}, LINGER, reach=["a", "m"]))
+    h.update("m", encode({"m": 1}, MAPPING, reach=["a", "p"]))
+    assert not h.is_news({"a": 5, "m": 1}, told, LINGER, ["p", "m"])
+    assert h.is_news({"a": 5, "m": 1}, told, LINGER, ["p"])  # m went out of our reach
+    h.update("m", encode({"a": 5, "m": 1}, LINGER, reach=["a", "p"]))
+    assert h.is_news({"a": 5, "m": 1}, told, LINGER, ["p", "m"])
+
+
+def test_a_robot_is_at_rest_once_every_robot_its_peers_hear_is_done_mapping() -> None:
+    h = Holdings()
+    assert h.at_rest("a")  # alone
+    h.meet("p")
+    assert not h.at_rest("a")  # p said nothing yet
+    h.update("p", encode({"p": 2}, LINGER, reach=["a", "q"]))
+    assert not h.at_rest("a")  # p hears q, of which we know nothing
+    h.update("q", encode({"q": 1}, MAPPING, reach=["p"]))
+    assert not h.at_rest("a")  # q still maps: p may come to hold what we lack
+    h.update("q", encode({"q": 2}, FINAL, reach=["p"]))
+    assert h.at_rest("a")

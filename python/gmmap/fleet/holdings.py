@@ -7,8 +7,9 @@ the sender holds, its state, and the robots it hears directly, in a few bytes pe
 robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
 gap is still being filled, which the next advert shows. The state is ``mapping`` while the
 sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
-last advert: it is done. A peer that vanished without a final one (a partition, a crash) is
-still waited for, by its last advert, until the deadline. A malformed or oversized advert is
+last advert: it is done (none is needed where its last ``linger`` one said all,
+`Holdings.at_rest`). A peer that vanished without a final one (a partition, a crash) is still
+waited for, by its last advert, until the deadline. A malformed or oversized advert is
 ignored, never trusted.
 """
 
@@ -158,13 +159,17 @@ class Holdings:
         advert (``told``, in ``state``): that advert said it was still mapping; or a present
         peer could fetch from us submaps of a robot out of its reach that neither it nor
         ``told`` holds (only robots in between carry those); or a present peer that lingers
-        (so may end on what we told it) now sees us hold all it holds, which it did not.
+        (so may end on what we told it) now sees us hold all it holds, which it did not,
+        unless a robot it hears, and we hear, has not told us it lingers: that robot's last
+        submaps are still to come, and the peer cannot end before news of them anyway.
         Partial catching up is no news, nor are the submaps of robots a peer hears itself: in
         a full mesh an advert a second would cost more than the submaps' own overhead."""
         if state == MAPPING:
             return True
+        present = set(present)
         with self._lock:
             adverts = {p: self._peers[p] for p in present if p in self._peers}
+        mapping = {p for p in present if p not in adverts or adverts[p].state == MAPPING}
         for peer, theirs in adverts.items():
             held, reach = theirs.held, {peer, *theirs.reach}
             more = any(
@@ -172,9 +177,20 @@ class Holdings:
             )
             covers = all(mine.get(r, 0) >= n for r, n in held.items())
             covered = all(told.get(r, 0) >= n for r, n in held.items())
-            if more or (theirs.state == LINGER and covers and not covered):
+            ends = theirs.state == LINGER and not mapping & reach
+            if more or (ends and covers and not covered):
                 return True
         return False
+
+    def at_rest(self, robot: str) -> bool:
+        """Whether every peer ``robot`` met told it is done mapping, and so did every robot
+        those peers hear: none of them can come to hold a submap we lack, so a robot that
+        leaves holding what they hold needs no final advert, its last one says it all."""
+        with self._lock:
+            adverts, met = dict(self._peers), set(self._met)
+        done = {p for p, a in adverts.items() if a.state != MAPPING}
+        heard = {r for a in adverts.values() for r in a.reach} - {robot}
+        return done == set(adverts) and met | heard <= done
 
     def relaying(self, mine: Mapping[str, int], present: Iterable[str]) -> bool:
         """Whether a present peer does not hear directly some robot we hold: we may be its

@@ -214,7 +214,11 @@ class RobotNode(Fetching):
             time.sleep(0.05)
         if not self.stopping:
             self.drain(timeout=max(5.0, seconds))
-        self._advertise(self._held(), holdings.FINAL)  # done: the peers need not wait for us
+        mine = self._held()
+        # Done: the peers need not wait for us. Where all are done and hold what we told, our
+        # leaving says as much, and an advert to each would cost two packets.
+        if not (complete and mine == self._told and self.holdings.at_rest(self.robot)):
+            self._advertise(mine, holdings.FINAL)
         self.outbox.flush(timeout=max(5.0, seconds))
         self.transport.close()  # done with the fleet: rejudging it would only cost keep-alives
         if self.config.robot.rejudge and not self.stopping:
