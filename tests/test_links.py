@@ -23,6 +23,7 @@ from gmmap.eval.fleetplots import completeness
 from gmmap.fleet.keys import free_port
 from gmmap.fleet.links import (
     HEADER_BYTES,
+    TIMESTAMP_BYTES,
     ZENOH_NO_GOSSIP,
     LinkOptions,
     Relay,
@@ -112,7 +113,7 @@ def test_what_a_closed_link_never_carried_is_not_counted(echo) -> None:
         counts = relay.counts()
     forward = counts["forward"]
     assert forward.bytes == 0
-    assert forward.wire_bytes < 20 * (HEADER_BYTES + 12) < len(payload)
+    assert forward.wire_bytes < 20 * (HEADER_BYTES + TIMESTAMP_BYTES) < len(payload)
 
 
 def test_rendezvous_follows_where_the_robots_are() -> None:
