@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 
-def wire_report(relays: dict, names: list[str], delivered: int) -> dict:
+def wire_report(relays: dict, names: list[str], deliveries: int) -> dict:
     """What the relays carried: per robot the packets it put on its links and their bytes,
     headers included (``bytes``), the payload under them (``payload_bytes``: Zenoh's framing,
     keep-alives and queries, what the relay read), the bytes it took off them; per link each
-    direction; and the bytes per submap delivered to a peer (``delivered`` in all)."""
+    direction; and the bytes per submap delivered to a peer (``deliveries`` in all)."""
     keys = ("bytes", "packets", "payload_bytes", "received_bytes", "chunks")
     wire = {n: dict.fromkeys(keys, 0) for n in names}
     links = []
@@ -32,7 +32,7 @@ def wire_report(relays: dict, names: list[str], delivered: int) -> dict:
     return {
         "wire": wire,
         "links": links,
-        "wire_bytes_per_delivered_submap": total / delivered if delivered else None,
+        "wire_bytes_per_delivered_submap": total / deliveries if deliveries else None,
     }
 
 
