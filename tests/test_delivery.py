@@ -36,3 +36,16 @@ def test_only_lasting_contacts_count_when_asked() -> None:
     assert kept[8:, 0, 2].all()
     assert reachable(up, 0, 0) == {1, 2}
     assert reachable(kept, 0, 0) == {2}  # the brief meeting with 1 is no chance
+
+
+def test_a_robot_in_between_hands_on_only_what_it_held_for_a_hold_in_one_contact() -> None:
+    up = np.zeros((12, 4, 4), dtype=bool)
+    up[5:8, 0, 2] = up[5:8, 2, 0] = True  # 0 hands its own on at once
+    up[4:8, 2, 3] = up[4:8, 3, 2] = True  # four frames, two of them after 2 got it
+    up[10:, 1, 3] = up[10:, 3, 1] = True  # as the links end: time for any hop
+    assert reachable(up, 0, 0) == {1, 2, 3}
+    assert reachable(up, 0, 0, hold=3) == {2}  # 2 met 3 too soon after it got it
+    assert reachable(up, 0, 8, hold=3) == set()  # after 0 and 2 parted
+    assert reachable(up, 3, 8, hold=3) == {1}  # the links as they end carry 3's own
+    up[8, 2, 3] = up[8, 3, 2] = True
+    assert reachable(up, 0, 0, hold=3) == {1, 2, 3}  # 2 held it through frames 6 to 8

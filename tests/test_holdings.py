@@ -121,6 +121,21 @@ def test_news_for_a_lingering_peer_waits_for_the_robots_it_hears_to_linger() -> 
     assert h.is_news({"a": 5, "m": 1}, told, LINGER, ["p", "m"])
 
 
+def test_a_mapping_robot_gone_quiet_neither_holds_news_back_nor_reaches_our_peers() -> None:
+    """m's session outlives its link (a rendezvous): it last said it maps and sent us nothing
+    lately. p cannot be waiting on m's news, and what we hold of m only we can hand on."""
+    h = Holdings()
+    told = {"a": 3, "m": 8}
+    h.update("p", encode({"a": 5, "m": 8}, LINGER, reach=["a", "m"]))
+    h.update("m", encode({"m": 5}, MAPPING, reach=["a", "p"]))
+    assert not h.is_news({"a": 5, "m": 10}, told, LINGER, ["p", "m"])  # m still talks to us
+    assert h.is_news({"a": 5, "m": 10}, told, LINGER, ["p", "m"], quiet=["m"])
+    assert h.is_news({"a": 5, "m": 8}, told, LINGER, ["p", "m"], quiet=["m"])  # p may end
+    h.update("m", encode({"m": 10}, LINGER, reach=["a", "p"]))
+    told = {"a": 3, "m": 10}
+    assert not h.is_news({"a": 4, "m": 10}, told, LINGER, ["p", "m"], quiet=["m"])  # m lingers
+
+
 def test_a_robot_is_at_rest_once_every_robot_its_peers_hear_is_done_mapping() -> None:
     h = Holdings()
     assert h.at_rest("a")  # alone

@@ -351,16 +351,17 @@ def _relay(proc: subprocess.Popen, log) -> None:
 def _reach_losses(config: Config, reach, names: list[str], out: Path) -> dict:
     """On rendezvous links (``reach``), per robot its submaps a peer in reach after them never
     got (``lost``), those no peer could reach (``out_of_reach``), and of the lost those that
-    contacts of at least `LASTING_S` could have carried (``lost_lasting``; the rest had only
-    briefer ones), from the robots' stores (`gmmap.eval.delivery`)."""
+    contacts of at least `LASTING_S` could have carried, each robot in between holding
+    them that long in one before it ends (``lost_lasting``; the rest had only briefer ones),
+    from the robots' stores (`gmmap.eval.delivery`)."""
     from gmmap.eval.delivery import lasting, links_up, lost_in_reach
 
     n = len(names)
     linked = links_up(reach.up, config.link.pairs(n), n, reach.frames)
     stores = {name: out / f"{name}.sqlite" for name in names}
     lost, unreachable = lost_in_reach(stores, linked, reach.frame)
-    frames = round(LASTING_S * config.sim.rate * config.sim.pace)
-    lost_lasting, _ = lost_in_reach(stores, lasting(linked, frames), reach.frame)
+    hold = round(LASTING_S * config.sim.rate * config.sim.pace)
+    lost_lasting, _ = lost_in_reach(stores, lasting(linked, hold), reach.frame, hold)
     return {"lost": lost, "out_of_reach": unreachable, "lost_lasting": lost_lasting}
 
 

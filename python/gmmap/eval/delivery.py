@@ -1,8 +1,9 @@
 """Which submaps a fleet lost: built, in reach of a peer at some moment after, and never
 delivered to it (`gmmap demo`'s ``lost``). On links that come and go (rendezvous links) a
 submap built after its robot left everyone's reach for good cannot be delivered by any
-protocol: it counts as ``out_of_reach``, not as lost. Where contacts are brief, `lasting`
-tells the losses a contact long enough to open a session could have prevented.
+protocol: it counts as ``out_of_reach``, not as lost. Where contacts are brief, `lasting` and
+`reachable`'s ``hold`` tell the losses that contacts long enough to open a session, and for
+a robot in between to hand a submap on, could have prevented.
 """
 
 from __future__ import annotations
@@ -54,29 +55,47 @@ def lasting(linked: np.ndarray, frames: int) -> np.ndarray:
     return kept
 
 
-def reachable(linked: np.ndarray, origin: int, frame: int) -> set[int]:
+def reachable(linked: np.ndarray, origin: int, frame: int, hold: int = 0) -> set[int]:
     """The robots that a submap of ``origin`` finished at ``frame`` can reach hop by hop as the
-    links come and go (any number of hops within a frame; after the last frame the links stay
-    as they ended, as the robots do)."""
-    got = np.zeros(linked.shape[1], dtype=bool)
+    links come and go (after the last frame the links stay as they ended, as the robots do).
+    With ``hold`` 0 a hop takes no time (any number within a frame): no protocol can do
+    better. Else the origin's own hops still take none (it sends each submap at once), but a
+    robot in between hands it on only over a link up for ``hold`` frames in a row while it
+    holds it: time for an advert to cross and the submap to be asked for."""
+    n = linked.shape[1]
+    start = min(max(frame, 0), len(linked) - 1)
+    got = np.zeros(n, dtype=bool)
     got[origin] = True
-    for up in linked[min(max(frame, 0), len(linked) - 1) :]:
-        while True:
-            more = got | up[got].any(axis=0)
-            if (more == got).all():
-                break
-            got = more
+    run = np.zeros((n, n), dtype=int)  # frames each link has been up while its first end held
+    for up in linked[start:]:
+        if hold:
+            run = np.where(up & got[:, None], run + 1, 0)
+            got = got | up[origin] | (run >= hold).any(axis=0)
+        else:
+            got = _closure(got, up)
+    got = _closure(got, linked[-1])  # the links as they ended: time enough for any hop
     return {int(i) for i in np.flatnonzero(got)} - {origin}
 
 
+def _closure(got: np.ndarray, up: np.ndarray) -> np.ndarray:
+    while True:
+        more = got | up[got].any(axis=0)
+        if (more == got).all():
+            return got
+        got = more
+
+
 def lost_in_reach(
-    stores: Mapping[str, Path], linked: np.ndarray, frame_at: Callable[[float], int]
+    stores: Mapping[str, Path],
+    linked: np.ndarray,
+    frame_at: Callable[[float], int],
+    hold: int = 0,
 ) -> tuple[dict[str, int], dict[str, int]]:
     """Per robot (``stores``: name → store, in robot order), its submaps that some peer in
     reach after them never received (``lost``) and those no peer could reach
     (``out_of_reach``), counted once per peer. A submap can leave once it is in its robot's
     store: the frame the robots were at then (``frame_at``: Unix time → frame) is where its
-    reach (`reachable`) starts."""
+    reach (`reachable`, each hop taking ``hold`` frames) starts."""
     names = list(stores)
     held: dict[str, set[tuple[str, int]]] = {}
     built: dict[str, dict[int, float]] = {}  # own submaps: seq -> when it was stored
@@ -89,7 +108,7 @@ def lost_in_reach(
     out_of_reach = dict.fromkeys(names, 0)
     for i, name in enumerate(names):
         for seq, stored in built[name].items():
-            reach = reachable(linked, i, frame_at(stored))
+            reach = reachable(linked, i, frame_at(stored), hold)
             for j, peer in enumerate(names):
                 if j != i and (name, seq) not in held[peer]:
                     counts = lost if j in reach else out_of_reach

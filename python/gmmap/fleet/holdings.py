@@ -153,7 +153,12 @@ class Holdings:
             return {peer: a.state for peer, a in self._peers.items()}
 
     def is_news(
-        self, mine: Mapping[str, int], told: Mapping[str, int], state: str, present: Iterable[str]
+        self,
+        mine: Mapping[str, int],
+        told: Mapping[str, int],
+        state: str,
+        present: Iterable[str],
+        quiet: Iterable[str] = (),
     ) -> bool:
         """Whether a lingering robot's holdings ``mine`` are news to its peers since its last
         advert (``told``, in ``state``): that advert said it was still mapping; or a present
@@ -163,15 +168,24 @@ class Holdings:
         unless a robot it hears, and we hear, has not told us it lingers: that robot's last
         submaps are still to come, and the peer cannot end before news of them anyway.
         Partial catching up is no news, nor are the submaps of robots a peer hears itself: in
-        a full mesh an advert a second would cost more than the submaps' own overhead."""
+        a full mesh an advert a second would cost more than the submaps' own overhead.
+
+        A robot in ``quiet`` (present, but it sent us nothing itself lately) that last said
+        it maps has left our reach, whatever its session says (a rendezvous link keeps it
+        until Zenoh's lease ends): it is waited for by no one near us, and taken to be out
+        of our peers' reach too, so what we hold of it is news to them."""
         if state == MAPPING:
             return True
         present = set(present)
         with self._lock:
             adverts = {p: self._peers[p] for p in present if p in self._peers}
         mapping = {p for p in present if p not in adverts or adverts[p].state == MAPPING}
+        gone = mapping & set(quiet)
+        mapping -= gone
         for peer, theirs in adverts.items():
-            held, reach = theirs.held, {peer, *theirs.reach}
+            if peer in gone:
+                continue
+            held, reach = theirs.held, {peer, *theirs.reach} - gone
             more = any(
                 n > max(held.get(r, 0), told.get(r, 0)) for r, n in mine.items() if r not in reach
             )
