@@ -14,7 +14,8 @@ sessions' set-up and the ending apart). Per case: submaps lost
 (built but never delivered to a peer in reach; goal 0), and on rendezvous links those
 built after their robot left every peer's reach for good (``out_of_reach``: no protocol can
 deliver them; `gmmap.eval.delivery`) and of the lost those that contacts of at least 2 s
-could have carried (``lost_lasting``; the others met their peers only for less), whether
+could have carried, each robot in between holding them for 2 s of one (``lost_lasting``;
+the others met their peers only for less, or reached a robot in between too late), whether
 every robot ended complete, the wall
 time, the time until every robot held every submap, the bytes on the wire per delivered
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
