@@ -33,6 +33,8 @@ def test_a_present_robot_quiet_for_a_while_is_fetched_through_the_others() -> No
     assert not a.relayed("r", present=["r"])
     now[0] = QUIET_S + 1  # a rendezvous link went down: r stays present until its lease ends
     assert a.relayed("r", present=["r"])
+    a.met("s")
+    assert a.quiet(["r", "s"]) == ["r"]
     a.add("r", 0, direct=True)
     assert not a.relayed("r", present=["r"])
 

@@ -18,6 +18,7 @@ class Node(Fetching):
         self.transport = SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer)
         self.arrivals = SimpleNamespace(
             relayed=lambda r, p: r in quiet,
+            quiet=lambda p: [r for r in p if r in quiet],
             since=lambda r, seqs: len(seqs),
             add=lambda r, s: True,
             now=lambda: 0.0,

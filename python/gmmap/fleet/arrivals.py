@@ -77,6 +77,11 @@ class Arrivals:
             quiet = self._clock() > self._heard.get(robot, -float("inf")) + self._quiet_s
             return robot not in set(present) or robot in self._silent or quiet
 
+    def quiet(self, present: Iterable[str]) -> list[str]:
+        """The present robots the robots in between must answer for (`relayed`)."""
+        present = list(present)
+        return [r for r in present if self.relayed(r, present)]
+
     def on_its_way(self, robot: str, since: int) -> bool:
         """Whether what we lack of ``robot`` from ``since`` on is on its way from the robot
         itself: it talks to us (sent us something directly within ``quiet_s``) and ``since``

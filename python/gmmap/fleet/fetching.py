@@ -116,7 +116,7 @@ class Fetching:
         if self._state != holdings.MAPPING or self.stopping:
             return []
         present = self.transport.peers()
-        quiet = [r for r in present if self.arrivals.relayed(r, present)]
+        quiet = self.arrivals.quiet(present)
         if len(quiet) == len(present):  # we hear no one: no robot in between to ask
             return []
         told = self.holdings.states()

@@ -195,9 +195,9 @@ class RobotNode(Fetching):
                 seen, changed = mine, now
             # In a mesh, one advert once submaps stop arriving says it all; a relay tells at once.
             quiet = now >= changed + holdings.SETTLE_S or self.holdings.relaying(mine, present)
-            away = [p for p in present if self.arrivals.relayed(p, present)]
-            told, state = self._told, self._told_state
-            news = quiet and self.holdings.is_news(mine, told, state, present, away)
+            news = quiet and self.holdings.is_news(
+                mine, self._told, self._told_state, present, self.arrivals.quiet(present)
+            )
             if holdings.advert_due(now, news, self._told_at):
                 self._advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
