@@ -11,28 +11,31 @@ from gmmap.fleet.holdings import LINGER, MAPPING
 class Node(Fetching):
     """A robot "a" whose peers ``present`` are, of which ``quiet`` sent nothing of late."""
 
-    def __init__(self, present, quiet, states=None, held=None, state=MAPPING):
+    def __init__(self, present, quiet, states=None, held=None, state=MAPPING, adverts=None):
         self.robot, self.stopping, self._state = "a", False, state
         self._lock, self.counts = threading.Lock(), {"fetched": 0}
         self.asked: list[tuple] = []
+        self.answers: dict[str | None, list] = {}  # what a fetch via each robot returns
         self.transport = SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer)
         self.arrivals = SimpleNamespace(
             relayed=lambda r, p: r in quiet,
             quiet=lambda p: [r for r in p if r in quiet],
             since=lambda r, seqs: len(seqs),
+            held=lambda r, seqs: set(seqs),
             add=lambda r, s: True,
             now=lambda: 0.0,
             on_its_way=lambda r, since: False,
         )
-        self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: {})
+        self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: adverts or {})
         held = {"b": 3, "c": 3} if held is None else held
         self.store = SimpleNamespace(
             count=lambda r, kind: held.get(r, 0), seqs=lambda r: list(range(held.get(r, 0)))
         )
 
-    def _fetch_answer(self, robot, kind, since, relay=False):
-        self.asked.append((robot, since, relay))
-        return []
+    def _fetch_answer(self, robot, kind, since, relay=False, via=None, held=()):
+        self.asked.append((robot, since, relay, via))
+        self.held = set(held)
+        return self.answers.get(via, [])
 
 
 def test_a_quiet_robot_is_asked_about_while_another_is_heard() -> None:
@@ -54,7 +57,20 @@ def test_a_probe_asks_the_robots_in_between_without_an_advert() -> None:
     node._fetch({"b"})  # no advert says anyone holds more: no query
     assert node.asked == []
     node._fetch(set(node._stalled()), probe=True)
-    assert node.asked == [("b", 3, True)]  # from its first gap, every holder answering
+    assert node.asked == [("b", 3, True, None)]  # from its first gap, every holder answering
+
+
+def test_a_relayed_fetch_asks_the_one_peer_we_hear_holding_the_most() -> None:
+    adverts = {"b": {"b": 9}, "c": {"b": 5}, "d": {"b": 6}, "e": {"b": 6}}
+    node = Node(["b", "c", "d", "e"], quiet={"b"}, state=LINGER, adverts=adverts)
+    node.answers["d"] = [(3, b"3")]
+    node._fetch({"b"})
+    assert node.asked == [("b", 3, True, "d")]  # b is quiet; d and e hold 6, d comes first
+    assert node.held == {0, 1, 2}  # what arrived: the answer leaves it out
+    node.answers.clear()
+    node.asked.clear()
+    node._fetch({"b"})  # d answers nothing (its link stalled): every peer is asked
+    assert node.asked == [("b", 3, True, "d"), ("b", 3, True, None)]
 
 
 def test_own_submaps_waiting_for_their_bundle_leave_now_not_in_the_answer() -> None:

@@ -155,12 +155,8 @@ def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(t
         a.start_frames(frames[0:2]).join()
         assert wait(lambda: b.store.seqs("a") == [0])
         assert wait(lambda: "a" in b.transport.peers())
-        assert not b.transport.answers_for("a")  # a is present: only a answers for a
-        assert b.transport.answers_for("a", relayed=True)  # unless the asker cannot reach a
-        assert a.transport.answers_for("a")
         a.stop()
         assert wait(lambda: "a" not in b.transport.peers())
-        assert b.transport.answers_for("a")
         c = node(tmp_path, "c", free_port(), [pb])  # joins after a left: b hands a's submap on
         c.start()
         try:
@@ -194,7 +190,7 @@ def test_a_fetch_asks_only_for_what_an_advert_shows_and_has_not_arrived(tmp_path
 
     b = node(tmp_path, "b", free_port())
     asked = []
-    b.transport.fetch = lambda robot, kind, since, relay=False: asked.append((robot, since)) or []
+    b.transport.fetch = lambda robot, kind, since, **_: asked.append((robot, since)) or []
     b.holdings.update("c", holdings.encode({"a": 2, "c": 3}, holdings.LINGER))
     b.arrivals.add("a", 0)
     b.arrivals.add("a", 1)  # queued, not stored yet: the advert's count, not news

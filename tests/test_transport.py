@@ -7,6 +7,14 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from gmmap.fleet.keys import (
+    FetchRequest,
+    fetch_key,
+    parse_fetch,
+    parse_reply_key,
+    parse_seq_ranges,
+    seq_ranges,
+)
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import (
     Transport,
@@ -83,6 +91,23 @@ def test_key_expressions():
         "gmmap/lab/a/submap/1/extra",
     ]:
         assert parse_data_key(bad) is None, bad
+    assert fetch_key("lab", "a", "submap", "b") == "gmmap/lab/a/submap/*/via/b"
+    asked = parse_fetch("gmmap/lab/a/submap/*/via/b", {"since": "3", "held": "5-6"})
+    assert asked == FetchRequest("lab", "a", "submap", 3, ((5, 6),))
+    assert [seq for seq in range(9) if asked.wants(seq)] == [3, 4, 7, 8]
+    every = parse_fetch("gmmap/lab/*/submap/*/via/*", {"skip": "a,b"})
+    assert every == FetchRequest("lab", "*", "submap", 0, (), frozenset({"a", "b"}))
+    for bad in ["gmmap/lab/a/submap/*", "gmmap/lab/a/submap/*/by/b", "gmmap/lab/a/submap/1/via/b"]:
+        assert parse_fetch(bad, {}) is None, bad
+    assert parse_fetch("gmmap/lab/a/submap/*/via/b", {"since": "x"}) is None
+    assert parse_reply_key("gmmap/lab/a/submap/7/via/b") == ("lab", "a", "submap", 7)
+    assert seq_ranges([9, 0, 1, 2, 3, 7, 10]) == "0-3,7,9-10" and seq_ranges([]) == ""
+    assert parse_seq_ranges("0-3,7,9-10") == [(0, 3), (7, 7), (9, 10)]
+    assert parse_seq_ranges(None) == [] == parse_seq_ranges("")
+    for bad in ["3-1", "a", "1-", "-1", "1,,2", ",".join(["1"] * 257), "9" * 20]:
+        assert parse_seq_ranges(bad) is None, bad
+    for bad in ["gmmap/lab/a/submap/7", "gmmap/lab/a/submap/7/via/b*", "gmmap/lab/a/submap/7/by/b"]:
+        assert parse_reply_key(bad) is None, bad
 
 
 @pytest.mark.parametrize(
@@ -259,17 +284,71 @@ def test_fetch_what_was_missed(tmp_path: Path):
             assert got == list(enumerate(payloads))
             assert b.fetch("a", "submap", 2, timeout=WAIT) == [(2, payloads[2]), (3, payloads[3])]
             assert b.fetch("a", "submap", 10, timeout=WAIT) == []
+            assert b.fetch("a", "submap", 0, timeout=WAIT, held=[1, 2]) == [
+                (0, payloads[0]),
+                (3, payloads[3]),
+            ]
             assert b.fetch("z", timeout=WAIT) == [(0, b"relayed")]
 
             received = b.stats()["received"]["a"]["submap"]
-            expected = sum(map(len, payloads)) + len(payloads[2]) + len(payloads[3])
-            assert received["fetch_messages"] == 6 == received["messages"]
+            again = [payloads[2], payloads[3], payloads[0], payloads[3]]
+            expected = sum(map(len, payloads + again))
+            assert received["fetch_messages"] == 8 == received["messages"]
             assert received["fetch_payload_bytes"] == expected
-            assert b.stats()["queries"]["sent"] == 4
+            assert b.stats()["queries"]["sent"] == 5
             served = a.stats()["sent"]["a"]["submap"]
             assert served["fetch_payload_bytes"] == expected
             assert served["payload_bytes"] == expected + sum(map(len, payloads))
-            assert a.stats()["queries"]["served"] == 4
+            assert a.stats()["queries"]["served"] == 5
+
+
+def test_a_fetch_reaches_only_the_robots_it_names(tmp_path: Path):
+    """From the owner, its owner alone answers; through one robot in between, that one; for a
+    robot out of reach with none named, every holder."""
+    port_a, port_c = free_port(), free_port()
+    with (
+        Store(tmp_path / "a.db") as store_a,
+        Store(tmp_path / "c.db") as store_c,
+        Transport(tconfig("lab", "a", port=port_a)) as a,
+        Transport(tconfig("lab", "c", port=port_c)) as c,
+    ):
+        for store, t in ((store_a, a), (store_c, c)):
+            store.put_submap("z", 0, b"z0")
+            t.serve(store.fetch_provider)
+        store_a.put_submap("a", 0, b"a0", own=True)
+        store_c.put_submap("a", 0, b"a0")
+        with Transport(tconfig("lab", "b", connect=[endpoint(port_a), endpoint(port_c)])) as b:
+            assert b.wait_for_peers(["a", "c"], WAIT)
+
+            def served():
+                return [t.stats()["queries"]["served"] for t in (a, c)]
+
+            assert b.fetch("a", "submap", 0, timeout=WAIT) == [(0, b"a0")]
+            assert served() == [1, 0]
+            assert b.fetch("z", "submap", 0, timeout=WAIT, via="c") == [(0, b"z0")]
+            assert served() == [1, 1]
+            assert b.fetch("z", "submap", 0, timeout=WAIT) == [(0, b"z0")]  # z is out of reach
+            assert served() == [2, 2]
+            assert b.fetch("a", "submap", 0, timeout=WAIT, relay=True) == [(0, b"a0")]
+            assert served() == [3, 3]
+
+
+def test_a_fetch_with_a_malformed_held_list_is_ignored(pair):
+    a, _ = pair
+    a.serve(lambda robot, kind, since: [(0, b"a0")])
+    port_a = int(a.listen_endpoints[0].rsplit(":", 1)[1])
+    raw_cfg = zenoh.Config()
+    raw_cfg.insert_json5("connect/endpoints", f'["{endpoint(port_a)}"]')
+    raw_cfg.insert_json5("listen/endpoints", "[]")
+    raw_cfg.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(raw_cfg) as raw:
+        key = fetch_key("lab", "a", "submap", "a")
+        held = ",".join(str(2 * i) for i in range(300))  # more ranges than anyone sends
+        for bad in [f"{key}?since=0;held=3-1", f"{key}?since=0;held={held}"]:
+            assert [r.ok for r in raw.get(bad, timeout=WAIT)] == []
+        good = [r.ok.payload.to_bytes() for r in raw.get(f"{key}?since=0", timeout=WAIT)]
+        assert good == [b"a0"]
+    assert a.stats()["ignored"] == 2
 
 
 def test_fetch_answers_keep_to_the_budget(tmp_path: Path):

@@ -61,12 +61,15 @@ class Arrivals:
             seqs.add(seq)
         return new
 
-    def since(self, robot: str, stored: Iterable[int]) -> int:
-        """Where a fetch of ``robot`` starts: its first gap, else after its latest. What arrived
-        counts, stored or still queued: asking again for submaps waiting in a busy robot's
-        inbox would have them sent twice."""
+    def held(self, robot: str, stored: Iterable[int]) -> set[int]:
+        """``robot``'s submaps that arrived, stored or still queued: asking again for those
+        waiting in a busy robot's inbox would have them sent twice."""
         with self._lock:
-            have = set(stored) | self._seqs.get(robot, set())
+            return set(stored) | self._seqs.get(robot, set())
+
+    def since(self, robot: str, stored: Iterable[int]) -> int:
+        """Where a fetch of ``robot`` starts: its first gap (`held`), else after its latest."""
+        have = self.held(robot, stored)
         return next(seq for seq in range(len(have) + 1) if seq not in have)
 
     def relayed(self, robot: str, present: Iterable[str]) -> bool:

@@ -1,6 +1,7 @@
 """A robot node's fetch stage (`gmmap.fleet.robot.RobotNode`): what it asks its peers for.
 
-A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fleet.arrivals`):
+A fetch asks for a robot's submaps from the first gap in what arrived, but those that arrived
+after it (`gmmap.fleet.arrivals`):
 
 - when an advert (`gmmap.fleet.holdings`) says a peer holds more of a robot than we do. Where
   that robot talks to us and all we lack of it is newer than what it last sent us, it is
@@ -15,7 +16,10 @@ A fetch asks for a robot's submaps from the first gap in what arrived (`gmmap.fl
   hold that robot's newest submaps: it maps too, so no advert of its tells us.
 
 The owner answers for its own submaps while we hear it. Where it leaves a query unanswered, or
-is quiet, the robots in between answer (``relay``), oldest first.
+is quiet, the robots in between answer (``relay``), oldest first: the one peer we hear whose
+advert holds the most of that robot (`Fetching._holder`), or, where none does or it answers
+nothing, every peer. Asking one spares the others' copies, and each query goes only to the
+robots it names (`gmmap.fleet.transport`).
 """
 
 from __future__ import annotations
@@ -84,12 +88,34 @@ class Fetching:
             if since >= told:
                 return
         asked = self.arrivals.now()
-        got = self.transport.fetch(r, KIND, since, relay=relay)
+        held = self.arrivals.held(r, self.store.seqs(r))
+        if relay:
+            got = self._relayed(r, since, held, probe)
+        else:
+            got = self.transport.fetch(r, KIND, since, held=held)
         if not got and not relay and self.arrivals.unanswered(r, asked):
             # Its link to us stalled: at once through those in between.
-            got = self.transport.fetch(r, KIND, since, relay=True)
+            got = self._relayed(r, since, held, probe)
         for seq, payload in got:
             self._enqueue_fetched(r, seq, payload)
+
+    def _relayed(self, r: str, since: int, held: set[int], probe: bool) -> list[tuple[int, bytes]]:
+        """``r``'s submaps from ``since`` on, through the robots in between. A probe asks every
+        peer: while robots map, their adverts are old."""
+        via = None if probe else self._holder(r, since)
+        got = self.transport.fetch(r, KIND, since, relay=True, via=via, held=held)
+        if not got and via is not None:  # its advert is stale, or its link stalled
+            got = self.transport.fetch(r, KIND, since, relay=True, held=held)
+        return got
+
+    def _holder(self, r: str, since: int) -> str | None:
+        """The peer we hear whose advert holds the most of ``r`` past ``since``; None where
+        none does."""
+        present = self.transport.peers()
+        heard = set(present) - set(self.arrivals.quiet(present)) - {r}
+        held = {p: h.get(r, 0) for p, h in self.holdings.adverts().items() if p in heard}
+        best = max(held.values(), default=0)
+        return min(p for p, n in held.items() if n == best) if best > since else None
 
     def _lacking(self, r: str) -> tuple[int, int]:
         """Where a fetch of ``r`` starts, and how many of it the adverts say a peer holds."""

@@ -21,7 +21,7 @@ Stages, each a thread:
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
   reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
-  between (`Transport.answers_for`), even while it maps (`gmmap.fleet.fetching`: while it
+  between (`Transport.fetch`, ``via``), even while it maps (`gmmap.fleet.fetching`: while it
   maps it also asks them for the newest of a robot that fell quiet). Robots that meet fresh
   send neither.
 

@@ -4,18 +4,18 @@ Key expressions (``<fleet>``, ``<robot>``, ``<kind>`` are names, ``<seq>`` a dec
 
     gmmap/<fleet>/<robot>/<kind>/<seq>     one message (a put); payload = the encoded bytes
     gmmap/<fleet>/<robot>                  liveliness token: the robot is present
-    gmmap/<fleet>/<robot>/<kind>/*?since=N fetch query: everything of that robot and kind, seq ≥ N
-                                           (``;relay=1``: the asker cannot reach that robot)
-    gmmap/<fleet>/*/<kind>/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
+    gmmap/<fleet>/<robot>/<kind>/*/via/<r>?since=N;held=5-7,9  fetch query (below)
+    gmmap/<fleet>/*/<kind>/*/via/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
 
 Robots send two kinds: ``submap`` (an encoded submap) and ``have`` (an advert of what the
 sender holds, `gmmap.fleet.holdings`; never fetched).
 
-Every robot that called :meth:`Transport.serve` answers fetch queries from its provider (its
-store), for its own data and for other robots' data it holds, so a robot that was away can catch
-up from whoever is present. Another robot's data it leaves to that robot while it sees it
-(`Transport.answers_for`), unless the asker cannot reach it: then robots in between hand it on
-(multi-hop). Replies use the message key expressions above.
+A fetch asks robot ``r`` (the robot itself, one in between, or ``*``: every peer) for what it
+holds of a robot and kind from seq N on, but the seqs the asker holds (``held``); replies are
+keyed ``…/<robot>/<kind>/<seq>/via/<r>``. Every robot that called :meth:`Transport.serve`
+answers those that name it from its store, for its own data and for others' it holds: a robot
+that was away catches up from whoever is present, and robots in between hand on the data of a
+robot the asker cannot reach (multi-hop). Zenoh sends a query only to the robots it names.
 
 Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each direction,
 
@@ -30,7 +30,7 @@ counts them on a link). Received messages count once accepted (right fleet, anot
 well-formed key); dropped ones only increment ``ignored``.
 
 Presence: a robot that closes its transport leaves at once, one that dies when Zenoh's lease
-expires (10 s). Names must be unique: two sessions of one name count as one robot.
+expires (60 s, `gmmap.fleet.session`). Two sessions of one name count as one robot.
 
 Zenoh's callback threads only parse, count and queue each event. One worker runs the message and
 join/leave callbacks in arrival order, another answers fetches: a slow provider delays nothing.
@@ -56,9 +56,13 @@ from gmmap.fleet.keys import (
     as_payload,
     check_seq,
     data_key,
+    fetch_selector,
     free_port,
     parse_data_key,
     parse_fetch,
+    parse_reply_key,
+    queryable_key,
+    reply_key,
 )
 from gmmap.fleet.outbox import Budget
 from gmmap.fleet.session import open_session
@@ -347,7 +351,7 @@ class Transport:
             if self._queryable is not None:
                 return
             self._queryable = self._session.declare_queryable(
-                f"{PREFIX}/{self.fleet}/*/*/*",
+                queryable_key(self.fleet, self.robot),
                 self._on_query,
                 complete=False,
                 allowed_origin=zenoh.Locality.REMOTE,
@@ -359,31 +363,27 @@ class Transport:
 
     def _answer(self, query: zenoh.Query) -> None:
         try:
-            request = parse_fetch(str(query.key_expr), query.parameters.get("since"))
-            if request is None or request[0] != self.fleet:
+            request = parse_fetch(str(query.key_expr), query.parameters)
+            if request is None or request.fleet != self.fleet:
                 self._counters.bump("ignored")
                 return
-            _, robot, kind, since = request
+            robot, kind = request.robot, request.kind
             with self._lock:
                 provider, roster, budget = self._provider, self._roster, self._budget
-            relayed = query.parameters.get("relay") == "1"
-            if provider is None or self._closed or not self.answers_for(robot, relayed):
+            if provider is None or self._closed:
                 return
             self._counters.bump("queries_served")
             try:
-                if robot == "*":  # fetch_unknown: every robot held but those named in skip
-                    skip = set(query.parameters.get("skip", "").split(","))
-                    robots = sorted(set(roster() if roster else ()) - skip - {""})
-                else:
-                    robots = [robot]
-                held = [(r, s, p) for r in robots for s, p in provider(r, kind, since)]
+                every = roster() if roster and robot == "*" else ()  # fetch_unknown
+                robots = sorted(set(every) - request.skip) if robot == "*" else [robot]
+                found = [(r, s, p) for r in robots for s, p in provider(r, kind, request.since)]
             except Exception as err:
                 log.exception("gmmap transport: fetch provider failed for %s/%s", robot, kind)
                 query.reply_err(f"provider failed: {err}".encode())
                 return
-            held = sorted(h for h in held if isinstance(h[1], int) and h[1] >= since)
-            for r, seq, payload in held:  # oldest first: a fetch cut short resumes at its gap
-                data, key = as_payload(payload), data_key(self.fleet, r, kind, seq)
+            found = sorted(h for h in found if request.wants(h[1]))
+            for r, seq, payload in found:  # oldest first: a fetch cut short resumes at its gap
+                data, key = as_payload(payload), reply_key(self.fleet, r, kind, seq, self.robot)
                 if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
                     return
                 query.reply(key, data)
@@ -395,11 +395,6 @@ class Transport:
             except Exception:  # already finalised by Zenoh (the session closing): harmless
                 log.debug("dropping a fetch query failed", exc_info=True)
 
-    def answers_for(self, robot: str, relayed: bool = False) -> bool:
-        """Whether we answer a fetch of ``robot``'s messages: our own, those of a robot we
-        do not see, any the asker cannot reach (``relayed``); not all N - 1 copies."""
-        return robot in ("*", self.robot) or relayed or robot not in self.peers()
-
     def fetch(
         self,
         robot: str,
@@ -407,20 +402,24 @@ class Transport:
         since_seq: int = 0,
         timeout: float | None = None,
         relay: bool = False,
+        via: str | None = None,
+        held: Iterable[int] = (),
     ) -> list[tuple[int, bytes]]:
-        """Ask the present peers for ``robot``'s messages of ``kind`` with seq ≥ ``since_seq``;
-        ``relay``: ``robot`` is out of our reach, so every peer holding them answers.
-
-        Returns ``(seq, payload)`` sorted by seq, one per seq (the first reply wins when several
-        peers hold it). Waits at most ``timeout`` seconds (default ``config.fetch_timeout``) and
-        returns what arrived by then; no peer serving gives an empty list.
-        """
+        """Ask ``robot`` for its messages of ``kind`` with seq ≥ ``since_seq``, but those
+        ``held`` already; or, with ``relay`` (or where ``robot`` is not present), the robots in
+        between: ``via`` alone where given, else every peer holding them. Returns ``(seq,
+        payload)`` sorted by seq, the first reply per seq winning, of what arrived within
+        ``timeout`` s (default ``config.fetch_timeout``); no peer serving gives an empty list."""
         self._check_open()
         check_name("robot", robot)
         check_name("kind", kind)
         check_seq(since_seq, "since_seq")
+        if via is not None:
+            check_name("via", via)
+        else:
+            via = "*" if relay or robot not in self.peers() else robot
         found = self._query(
-            f"{PREFIX}/{self.fleet}/{robot}/{kind}/*?since={since_seq}{';relay=1' * relay}",
+            fetch_selector(self.fleet, robot, kind, via, since_seq, held),
             timeout,
             lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
         )
@@ -436,7 +435,7 @@ class Transport:
         check_name("kind", kind)
         skip = sorted({check_name("robot", r) for r in known})
         found = self._query(
-            f"{PREFIX}/{self.fleet}/*/{kind}/*?since=0;skip={','.join(skip)}",
+            fetch_selector(self.fleet, "*", kind, "*", skip=skip),
             timeout,
             lambda p: p[0] == self.fleet and p[2] == kind and p[1] not in skip,
         )
@@ -474,7 +473,7 @@ class Transport:
                 log.warning("gmmap transport: a peer failed to answer %s: %s", selector, why)
                 continue
             key = str(sample.key_expr)
-            parsed = parse_data_key(key)
+            parsed = parse_reply_key(key)
             if parsed is None or not accept(parsed):
                 self._counters.bump("ignored")
                 continue
