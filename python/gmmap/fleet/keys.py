@@ -14,7 +14,7 @@ from gmmap.errors import TransportConfigError
 from gmmap.names import NAME_RE
 
 PREFIX = "gmmap"
-VIA = "via"  # a relayed fetch's chunk: the robot asked to hand another's messages on
+VIA = "via"  # in a fetch's key, before the robot asked to answer it
 
 
 def check_seq(seq: object, what: str = "seq") -> int:
