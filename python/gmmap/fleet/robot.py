@@ -99,7 +99,6 @@ class RobotNode(Fetching):
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
-        self._unkept = 0  # arrivals not yet stored (or dropped)
         bundled = config.robot.bundle_size > 1
         self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
         self.holdings = holdings.Holdings()  # what the peers say they hold
@@ -203,7 +202,7 @@ class RobotNode(Fetching):
                 self._advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
-            if now >= start + seconds and settled and not lacking and self._delivered():
+            if now >= start + seconds and settled and not lacking and self._idle():
                 complete = True
                 break
             wanted = holdings.wanted(self.holdings.adverts(), mine)
@@ -216,17 +215,14 @@ class RobotNode(Fetching):
                 said = now
             time.sleep(0.05)
         if not self.stopping:
-            self._wait(self._delivered, max(5.0, seconds))
+            self.drain(timeout=max(5.0, seconds))
         mine = self._held()
         # Done: the peers need not wait for us. Where all are done and hold what we told, our
         # leaving says as much, and an advert to each would cost two packets.
         if not (complete and mine == self._told and self.holdings.at_rest(self.robot)):
             self._advertise(mine, holdings.FINAL)
         self.outbox.flush(timeout=max(5.0, seconds))
-        # Done with the fleet: matching what arrived last and rejudging would only cost
-        # keep-alives. The rejudging needs every submap held by the matching stage first.
-        self.transport.close()
-        self._wait(self._matched, max(5.0, end - time.monotonic()))
+        self.transport.close()  # done with the fleet: rejudging it would only cost keep-alives
         if self.config.robot.rejudge and not self.stopping:
             if progress:
                 progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
@@ -250,26 +246,19 @@ class RobotNode(Fetching):
         if kind == KIND:
             self.counts["sent"] += 1
 
-    def _delivered(self) -> bool:
-        """Nothing that arrived waits to be stored, nothing to fetch, nothing to send."""
-        with self._lock:
-            unkept = self._unkept
-        return unkept == 0 and self.fetch_queue.empty() and not self.outbox.pending()
-
-    def _matched(self) -> bool:
-        """Nothing waits to be matched or optimised."""
+    def _idle(self) -> bool:
         with self._lock:
             busy = self._busy
-        return busy == 0 and self.kept.empty() and not self._changed.is_set()
+        idle = self.inbox.empty() and self.kept.empty() and self.fetch_queue.empty()
+        idle = idle and not self._changed.is_set()
+        idle = idle and not self.outbox.pending()
+        return busy == 0 and idle
 
     def drain(self, timeout: float = 10.0) -> bool:
         """Wait until inbox, fetches and optimisation are idle (True) or ``timeout`` s pass."""
-        return self._wait(lambda: self._delivered() and self._matched(), timeout)
-
-    def _wait(self, done: Callable[[], bool], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and not self.stopping:
-            if done():
+            if self._idle():
                 return True
             time.sleep(0.02)
         return False
@@ -337,7 +326,6 @@ class RobotNode(Fetching):
     def _enqueue(self, item: Arrived) -> None:
         with self._lock:
             self._busy += 1
-            self._unkept += 1
         self.inbox.put(item)
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
@@ -389,12 +377,11 @@ class RobotNode(Fetching):
                 s = self._accept(item)
             except Exception:
                 log.exception("%s: keeping %s/%d failed", self.robot, item.robot, item.seq)
-            if s is not None:
-                self.kept.put(s)  # before the count drops: matching is never seen done early
-            with self._lock:
-                self._unkept -= 1
-                if s is None:
+            if s is None:
+                with self._lock:
                     self._busy -= 1
+            else:
+                self.kept.put(s)
         self.kept.put(None)
 
     def _accept(self, item: Arrived) -> Submap | None:
