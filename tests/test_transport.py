@@ -220,6 +220,15 @@ def test_liveliness_join_and_leave():
         assert joined.empty()
 
 
+def raw_session(port: int) -> zenoh.Session:
+    """A bare Zenoh session connected to ``port``: a peer that speaks Zenoh, not gmmap."""
+    cfg = zenoh.Config()
+    cfg.insert_json5("connect/endpoints", f'["{endpoint(port)}"]')
+    cfg.insert_json5("listen/endpoints", "[]")
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(cfg)
+
+
 def test_other_fleet_and_malformed_keys_are_ignored(pair):
     a, _ = pair
     inbox = Inbox()
@@ -228,11 +237,7 @@ def test_other_fleet_and_malformed_keys_are_ignored(pair):
     with Transport(tconfig("other", "c", listen=[], connect=[endpoint(port_a)])) as c:
         assert c.listen_endpoints == ()
         # Fleets do not see each other's presence either.
-        raw_cfg = zenoh.Config()
-        raw_cfg.insert_json5("connect/endpoints", f'["{endpoint(port_a)}"]')
-        raw_cfg.insert_json5("listen/endpoints", "[]")
-        raw_cfg.insert_json5("scouting/multicast/enabled", "false")
-        with zenoh.open(raw_cfg) as raw:
+        with raw_session(port_a) as raw:
             probe = raw.declare_publisher("gmmap/lab/x/submap/*")
             assert wait_until(lambda: probe.matching_status.matching)
             c.publish("submap", 0, b"other fleet")
@@ -336,12 +341,7 @@ def test_a_fetch_reaches_only_the_robots_it_names(tmp_path: Path):
 def test_a_fetch_with_a_malformed_held_list_is_ignored(pair):
     a, _ = pair
     a.serve(lambda robot, kind, since: [(0, b"a0")])
-    port_a = int(a.listen_endpoints[0].rsplit(":", 1)[1])
-    raw_cfg = zenoh.Config()
-    raw_cfg.insert_json5("connect/endpoints", f'["{endpoint(port_a)}"]')
-    raw_cfg.insert_json5("listen/endpoints", "[]")
-    raw_cfg.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(raw_cfg) as raw:
+    with raw_session(int(a.listen_endpoints[0].rsplit(":", 1)[1])) as raw:
         key = fetch_key("lab", "a", "submap", "a")
         held = ",".join(str(2 * i) for i in range(300))  # more ranges than anyone sends
         for bad in [f"{key}?since=0;held=3-1", f"{key}?since=0;held={held}"]:
