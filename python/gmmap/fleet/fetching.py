@@ -75,7 +75,7 @@ class Fetching:
     def _fetch_one(self, r: str, probe: bool) -> None:
         if self.stopping:
             return
-        since, told = self._lacking(r)
+        held, since, told = self._lacking(r)
         if since >= told and not probe:
             return
         if not probe and self.arrivals.on_its_way(r, since):
@@ -84,18 +84,17 @@ class Fetching:
         relay = probe or self.arrivals.relayed(r, self.transport.peers())
         if not relay and self.arrivals.patient:  # what r sent the peer may be landing here
             time.sleep(LANDING_S)
-            since, told = self._lacking(r)
+            held, since, told = self._lacking(r)
             if since >= told:
                 return
         asked = self.arrivals.now()
-        held = self.arrivals.held(r, self.store.seqs(r))
         if relay:
             got = self._relayed(r, since, held, probe)
         else:
             got = self.transport.fetch(r, KIND, since, held=held)
         if not got and not relay and self.arrivals.unanswered(r, asked):
             # Its link to us stalled: at once through those in between.
-            got = self._relayed(r, since, held, probe)
+            got = self._relayed(r, since, held, probe=False)
         for seq, payload in got:
             self._enqueue_fetched(r, seq, payload)
 
@@ -117,12 +116,14 @@ class Fetching:
         best = max(held.values(), default=0)
         return min(p for p, n in held.items() if n == best) if best > since else None
 
-    def _lacking(self, r: str) -> tuple[int, int]:
-        """Where a fetch of ``r`` starts, and how many of it the adverts say a peer holds."""
-        since = self.arrivals.since(r, self.store.seqs(r))
+    def _lacking(self, r: str) -> tuple[set[int], int, int]:
+        """What of ``r`` arrived, where a fetch of it starts, and how many of it the adverts say
+        a peer holds."""
+        held = self.arrivals.held(r, self.store.seqs(r))
+        since = self.arrivals.since(r, held)
         # The adverts count what is stored; what is still queued here counts as arrived.
         told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
-        return since, told
+        return held, since, told
 
     def _later(self, r: str) -> None:
         """Asks about ``r`` again once it could have fallen quiet: if what it sends has not
