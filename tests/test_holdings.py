@@ -17,13 +17,20 @@ def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
     counts = {"robot_1": 7, "robot_0": 9}
     for state in (MAPPING, LINGER, FINAL):
         for reach in ([], ["robot_1"], ["b", "a"], ["robot_0", "zed"]):
-            got = decode(encode(counts, state, reach))
-            assert got == Advert(counts, state, tuple(sorted(reach)))
-    # state, 2 robots, each its name and count, 1 heard: robot_1 by index
+            for done in ({}, {"robot_0": 9}, {"robot_1": 7, "far": 3}):
+                got = decode(encode(counts, state, reach, done))
+                assert got == Advert(counts, state, tuple(sorted(reach)), done)
+    # state, 2 robots, each its name and count, 1 heard: robot_1 by index, none done
     assert encode(counts, LINGER, ["robot_1"]) == (
-        b"\x01\x02\x07robot_0\x09\x07robot_1\x07\x01\x01"
+        b"\x01\x02\x07robot_0\x09\x07robot_1\x07\x01\x01\x00"
     )
-    assert len(encode({f"robot_{i}": 40 for i in range(5)}, LINGER, ["robot_1"])) == 49
+    # 2 done: robot_0 by index, then one named past the counted ones, each with its total
+    assert encode(counts, LINGER, [], {"robot_0": 9, "z": 4}).endswith(
+        b"\x00\x02\x00\x09\x02\x01z\x04"
+    )
+    five = {f"robot_{i}": 40 for i in range(5)}
+    assert len(encode(five, LINGER, ["robot_1"])) == 50
+    assert len(encode(five, LINGER, ["robot_1"], five)) == 60
     good = encode(counts, LINGER, ["zed"])
     for bad in (
         b"",
@@ -34,7 +41,9 @@ def test_an_advert_round_trips_and_anything_else_is_ignored() -> None:
         b"\x00\x02\x07robot_0\x01\x07robot_0\x02\x00",  # a robot named twice
         b"\x00\x01\x09bad name!\x01\x00",
         b"\x00\x01\x02\xff\xfe\x01\x00",  # not UTF-8
-        b"\x00\x01\x01a\x01\x01\x05",  # a heard index past the names
+        b"\x00\x01\x01a\x01\x01\x05\x00",  # a heard index past the names
+        b"\x00\x01\x01a\x01\x00\x01\x00",  # a robot done, without its total
+        b"\x00\x01\x01a\x01\x00\x01\x03\x01",  # a done index past the names
         b"\x00\x01\x01a" + b"\xff" * 10 + b"\x01\x00",  # a count past 64 bits
         b"\x00\xff\x7f",  # more robots than allowed
         b"\x00" * (MAX_BYTES + 1),
@@ -147,3 +156,34 @@ def test_a_robot_is_at_rest_once_every_robot_its_peers_hear_is_done_mapping() ->
     assert not h.at_rest("a")  # q still maps: p may come to hold what we lack
     h.update("q", encode({"q": 2}, FINAL, reach=["p"]))
     assert h.at_rest("a")
+
+
+def test_a_robot_knows_who_is_done_mapping_from_its_peers_and_their_adverts() -> None:
+    """A chain a - p - q: a never hears q, and learns from p's advert that q is done with 4
+    submaps; a waits until it is done itself, knows all others to be, and holds their last."""
+    h = Holdings()
+    h.meet("p")
+    assert h.finished("a", MAPPING, {"a": 3}) == {}
+    assert h.unfinished("a", {"a": 3}, {"a": 3}) == ["p"]  # met, not a word yet
+    h.update("p", encode({"a": 3, "p": 2, "q": 1}, MAPPING, reach=["a", "q"]))
+    done = h.finished("a", LINGER, {"a": 3})
+    assert done == {"a": 3}
+    assert h.unfinished("a", done, {"a": 3, "p": 2, "q": 1}) == ["p", "q"]
+    h.update("p", encode({"a": 3, "p": 2, "q": 4}, LINGER, ["a", "q"], {"p": 2, "q": 4}))
+    done = h.finished("a", LINGER, {"a": 3, "p": 2, "q": 1})
+    assert done == {"a": 3, "p": 2, "q": 4}
+    assert h.unfinished("a", done, {"a": 3, "p": 2, "q": 1}) == ["q"]  # q's last to come
+    assert h.unfinished("a", done, {"a": 3, "p": 2, "q": 4}) == []
+
+
+def test_that_a_robot_out_of_a_peers_reach_is_done_is_news_to_that_peer() -> None:
+    h = Holdings()
+    told = {"a": 3, "q": 4}
+    h.update("p", encode(told, LINGER, reach=["a"]))  # p hears only us, not q
+    done = {"a": 3, "q": 4}
+    assert h.is_news(told, told, LINGER, ["p"], done=(done, {"a": 3}))
+    assert not h.is_news(told, told, LINGER, ["p"], done=(done, done))  # told already
+    h.update("p", encode(told, LINGER, ["a"], {"q": 4}))
+    assert not h.is_news(told, told, LINGER, ["p"], done=(done, {"a": 3}))  # p knows
+    h.update("p", encode(told, LINGER, reach=["a", "q"]))
+    assert not h.is_news(told, told, LINGER, ["p"], done=(done, {"a": 3}))  # p hears q

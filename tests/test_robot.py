@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from conftest import wait
 from gmmap.config import Config, load_config
 from gmmap.eval.registration import pose_errors
+from gmmap.fleet.links import ZENOH_NO_GOSSIP
 from gmmap.fleet.robot import RobotNode
 from gmmap.fleet.store import Store
 from gmmap.fleet.transport import free_port
@@ -100,11 +102,13 @@ def _close_nodes():
         _OPEN.pop().stop()
 
 
-def node(tmp_path, name, port, peers=(), fleet="f"):
+def node(tmp_path, name, port, peers=(), fleet="f", zenoh=None):
     config = Config(
         # Each submap at once: these tests are about what arrives, not when.
         robot=RobotOptions(name=name, fleet=fleet, store=str(tmp_path / f"{name}.db"), bundle=1),
-        transport=TransportOptions(port=port, connect=[f"tcp/127.0.0.1:{p}" for p in peers]),
+        transport=TransportOptions(
+            port=port, connect=[f"tcp/127.0.0.1:{p}" for p in peers], zenoh_options=zenoh or {}
+        ),
         build=SLICE_BUILD,
         backend=SLICE_BACKEND,
     )
@@ -165,6 +169,35 @@ def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(t
             c.stop()
     finally:
         b.stop()
+
+
+def test_the_end_of_a_chain_waits_for_the_last_submaps_of_the_other_end(tmp_path, frames):
+    """a - b - c, and a never hears c: c maps on after a and b are done. a ends only once c's
+    last submap has reached it through b, though a and b hold the same all along."""
+    pa, pb, pc = free_port(), free_port(), free_port()
+    b = node(tmp_path, "b", pb, zenoh=ZENOH_NO_GOSSIP)
+    a = node(tmp_path, "a", pa, [pb], zenoh=ZENOH_NO_GOSSIP)
+    c = node(tmp_path, "c", pc, [pb], zenoh=ZENOH_NO_GOSSIP)
+    for n in (b, a, c):
+        n.start()
+    assert wait(lambda: b.transport.peers() == ["a", "c"])
+    a.start_frames(frames[0:2]).join()
+    b.start_frames(frames[2:4]).join()
+    ended = {}
+    lingering = [
+        threading.Thread(target=lambda n=n: ended.setdefault(n.robot, n.linger(0.5)))
+        for n in (a, b)
+    ]
+    for th in lingering:
+        th.start()
+    time.sleep(3.0)  # a and b hold each other's submap: enough to end, were c done
+    assert "a" not in ended and a.store.seqs("c") == []
+    c.start_frames(frames[4:8]).join()
+    assert c.linger(0.5)
+    for th in lingering:
+        th.join(timeout=60)
+    assert ended == {"a": True, "b": True}
+    assert a.store.seqs("c") == [0, 1] and "c" not in a.transport.peers()
 
 
 def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):

@@ -68,8 +68,9 @@ class RobotOptions:
     """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
     ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
     ``linger``: seconds it keeps receiving, matching and optimising after its frames end;
-    then it stays until the peers in reach hold what it holds and it holds what they hold, or
-    until ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
+    then it stays until the peers in reach hold what it holds and it holds what they hold, and
+    every robot it knows of is done mapping and its last submap has arrived, or until
+    ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
     ``rejudge``: at the end, every pair held is judged again in one call, so that the final
     maps are an offline merge's of the same submaps, whatever order they arrived in.
     ``budget``: bytes/s of payload and keys the robot puts on each link, submaps, adverts and

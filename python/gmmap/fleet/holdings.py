@@ -2,14 +2,18 @@
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
 An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``: how many submaps of each robot
-the sender holds, its state, and the robots it hears directly, in a few bytes per robot
-(`encode`; the layout is in docs/wire-format.md, "Adverts"). Counts, not sets: a
+the sender holds, its state, the robots it hears directly, and the robots it knows to be done
+mapping with how many submaps each built, in a few bytes per robot (`encode`; the layout is in
+docs/wire-format.md, "Adverts"). Counts, not sets: a
 robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
 gap is still being filled, which the next advert shows. The state is ``mapping`` while the
 sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
 last advert: it is done (none is needed where its last ``linger`` one said all,
 `Holdings.at_rest`). A peer that vanished without a final one (a partition, a crash) is still
-waited for, by its last advert, until the deadline. A malformed or oversized advert is
+waited for, by its last advert, until the deadline. The robots done mapping travel on from
+advert to advert (`Holdings.finished`), so that a robot at one end of a chain knows when one
+at the other end, which it never hears, has built its last submap, and waits until it holds
+that one too (`Holdings.unfinished`). A malformed or oversized advert is
 ignored, never trusted.
 """
 
@@ -17,7 +21,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from gmmap.errors import DecodeError
 from gmmap.fleet.bitstream import _Reader, _Writer
@@ -42,14 +46,21 @@ MAPPING, LINGER, FINAL = STATES = ("mapping", "linger", "final")
 
 @dataclass(frozen=True)
 class Advert:
-    """What a peer told: its counts, its state and the robots it hears directly (``reach``)."""
+    """What a peer told: its counts, its state, the robots it hears directly (``reach``) and
+    those it knows to be done mapping, with how many submaps each built (``done``)."""
 
     held: dict[str, int]
     state: str = MAPPING
     reach: tuple[str, ...] = ()
+    done: dict[str, int] = field(default_factory=dict)
 
 
-def encode(counts: Mapping[str, int], state: str = MAPPING, reach: Iterable[str] = ()) -> bytes:
+def encode(
+    counts: Mapping[str, int],
+    state: str = MAPPING,
+    reach: Iterable[str] = (),
+    done: Mapping[str, int] | None = None,
+) -> bytes:
     if state not in STATES:
         raise ValueError(f"an advert's state is one of {STATES}, not {state!r}")
     w = _Writer()
@@ -63,10 +74,20 @@ def encode(counts: Mapping[str, int], state: str = MAPPING, reach: Iterable[str]
     heard = sorted(reach)
     w.uvarint(len(heard))
     for name in heard:
-        w.uvarint(index.get(name, len(names)))
-        if name not in index:
-            _name(w, name)
+        _ref(w, name, index)
+    done = done or {}
+    w.uvarint(len(done))
+    for name in sorted(done):
+        _ref(w, name, index)
+        w.uvarint(done[name])
     return bytes(w.buf)
+
+
+def _ref(w: _Writer, name: str, index: Mapping[str, int]) -> None:
+    """A robot as its index among the counted ones, or, past them, its name."""
+    w.uvarint(index.get(name, len(index)))
+    if name not in index:
+        _name(w, name)
 
 
 def _name(w: _Writer, name: str) -> None:
@@ -93,15 +114,21 @@ def decode(payload: bytes) -> Advert | None:
         for _ in range(r.uvarint("robots", MAX_ROBOTS)):
             names.append(_read_name(r))
             counts[names[-1]] = r.uvarint("count", MAX_COUNT)
-        reach = []
-        for _ in range(r.uvarint("robots heard", MAX_ROBOTS)):
-            i = r.uvarint("robot heard", len(names))
-            reach.append(names[i] if i < len(names) else _read_name(r))
+        reach = [_read_ref(r, names) for _ in range(r.uvarint("robots heard", MAX_ROBOTS))]
+        done = {}
+        for _ in range(r.uvarint("robots done", MAX_ROBOTS)):
+            name = _read_ref(r, names)
+            done[name] = r.uvarint("built", MAX_COUNT)
         if r.pos != len(payload) or len(counts) != len(names):
             return None  # trailing bytes, or a robot named twice
     except (DecodeError, UnicodeDecodeError):
         return None
-    return Advert(counts, state, tuple(reach))
+    return Advert(counts, state, tuple(reach), done)
+
+
+def _read_ref(r: _Reader, names: list[str]) -> str:
+    i = r.uvarint("robot", len(names))
+    return names[i] if i < len(names) else _read_name(r)
 
 
 class Holdings:
@@ -159,6 +186,7 @@ class Holdings:
         state: str,
         present: Iterable[str],
         quiet: Iterable[str] = (),
+        done: tuple[Mapping[str, int], Mapping[str, int]] = ({}, {}),
     ) -> bool:
         """Whether a lingering robot's holdings ``mine`` are news to its peers since its last
         advert (``told``, in ``state``): that advert said it was still mapping; or a present
@@ -166,7 +194,9 @@ class Holdings:
         ``told`` holds (only robots in between carry those); or a present peer that lingers
         (so may end on what we told it) now sees us hold all it holds, which it did not,
         unless a robot it hears, and we hear, has not told us it lingers: that robot's last
-        submaps are still to come, and the peer cannot end before news of them anyway.
+        submaps are still to come, and the peer cannot end before news of them anyway; or a
+        present peer does not know that a robot out of its reach is done mapping (``done``:
+        the robots we know to be done, and those we told, each with its total; `finished`).
         Partial catching up is no news, nor are the submaps of robots a peer hears itself: in
         a full mesh an advert a second would cost more than the submaps' own overhead.
 
@@ -182,6 +212,7 @@ class Holdings:
         mapping = {p for p in present if p not in adverts or adverts[p].state == MAPPING}
         gone = mapping & set(quiet)
         mapping -= gone
+        finished, told_done = done
         for peer, theirs in adverts.items():
             if peer in gone:
                 continue
@@ -192,9 +223,41 @@ class Holdings:
             covers = all(mine.get(r, 0) >= n for r, n in held.items())
             covered = all(told.get(r, 0) >= n for r, n in held.items())
             ends = theirs.state == LINGER and not mapping & reach
-            if more or (ends and covers and not covered):
+            ended = any(
+                n not in (theirs.done.get(r), told_done.get(r))
+                for r, n in finished.items()
+                if r not in reach
+            )
+            if more or ended or (ends and covers and not covered):
                 return True
         return False
+
+    def finished(self, robot: str, state: str, mine: Mapping[str, int]) -> dict[str, int]:
+        """The robots known to be done mapping, each with how many submaps it built: peers
+        whose own advert said so, robots a peer's advert said so of, and ``robot`` (we, in
+        ``state``, holding ``mine``) once it lingers."""
+        with self._lock:
+            adverts = dict(self._peers)
+        done: dict[str, int] = {}
+        for peer, a in adverts.items():
+            told = {**a.done, peer: a.held.get(peer, 0)} if a.state != MAPPING else a.done
+            for r, n in told.items():
+                done[r] = max(done.get(r, 0), n)
+        done.pop(robot, None)
+        if state != MAPPING:
+            done[robot] = mine.get(robot, 0)
+        return done
+
+    def unfinished(self, robot: str, done: Mapping[str, int], mine: Mapping[str, int]) -> list[str]:
+        """The robots we know of (met, or named in an advert) not known to be done mapping
+        (``done``, `finished`), or whose last submaps we do not hold yet: a robot that left
+        before those reached it would miss them, and so might the robots beyond it."""
+        with self._lock:
+            known = set(self._met)
+            for a in self._peers.values():
+                known.update(a.held, a.reach, a.done)
+        known = (known | set(mine)) - {robot}
+        return sorted(r for r in known if r not in done or mine.get(r, 0) < done[r])
 
     def at_rest(self, robot: str) -> bool:
         """Whether every peer ``robot`` met told it is done mapping, and so did every robot
@@ -247,9 +310,10 @@ def wanted(adverts: Mapping[str, Mapping[str, int]], mine: Mapping[str, int]) ->
     return sorted({r for held in adverts.values() for r, n in held.items() if n > mine.get(r, 0)})
 
 
-def describe(lacking: dict[str, dict[str, int]]) -> str:
-    """``lacking`` (`Holdings.lacking`) as words."""
-    parts = []
+def describe(lacking: dict[str, dict[str, int]], unfinished: Iterable[str] = ()) -> str:
+    """``lacking`` (`Holdings.lacking`) and ``unfinished`` (`Holdings.unfinished`) as words."""
+    why = "still mapping, or its last submaps on the way"
+    parts = [f"{r} ({why})" for r in unfinished if r not in lacking]
     for peer, v in sorted(lacking.items()):
         if v["they_lack"] < 0:
             parts.append(f"{peer} (no advert yet)")

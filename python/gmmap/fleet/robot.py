@@ -99,11 +99,13 @@ class RobotNode(Fetching):
         self._changed = threading.Event()  # the graph changed since the last optimisation
         self._threads: list[threading.Thread] = []
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
+        self._unkept = 0  # arrivals not yet stored (or dropped)
         bundled = config.robot.bundle_size > 1
         self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
         self.holdings = holdings.Holdings()  # what the peers say they hold
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
+        self._told_done: dict[str, int] = {}  # the robots done mapping our last advert named
         self._told_state = self._state = holdings.MAPPING
         self._closed, self._live = False, None
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
@@ -177,7 +179,9 @@ class RobotNode(Fetching):
 
     def linger(self, seconds: float, progress: Callable | None = None) -> bool:
         """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
-        no more (`gmmap.fleet.holdings`), or ``robot.deadline`` s; True if complete."""
+        no more, and every robot we know of is done mapping and its last submap is here
+        (`gmmap.fleet.holdings`), or ``robot.deadline`` s; True if complete. Then leave the
+        fleet, and finish matching."""
         if self.stopping:
             return False
         start = time.monotonic()
@@ -191,18 +195,26 @@ class RobotNode(Fetching):
             mine = self._held()
             present = self.transport.peers()
             lacking = self.holdings.lacking(mine, present)
+            done = self.holdings.finished(self.robot, holdings.LINGER, mine)
+            unfinished = self.holdings.unfinished(self.robot, done, mine)
             if mine != seen:
                 seen, changed = mine, now
             # In a mesh, one advert once submaps stop arriving says it all; a relay tells at once.
             quiet = now >= changed + holdings.SETTLE_S or self.holdings.relaying(mine, present)
             news = quiet and self.holdings.is_news(
-                mine, self._told, self._told_state, present, self.arrivals.quiet(present)
+                mine,
+                self._told,
+                self._told_state,
+                present,
+                self.arrivals.quiet(present),
+                (done, self._told_done),
             )
             if holdings.advert_due(now, news, self._told_at):
                 self._advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
-            if now >= start + seconds and settled and not lacking and self._idle():
+            ended = not lacking and not unfinished
+            if now >= start + seconds and settled and ended and self._delivered():
                 complete = True
                 break
             wanted = holdings.wanted(self.holdings.adverts(), mine)
@@ -210,19 +222,22 @@ class RobotNode(Fetching):
             if now >= fetch and wanted and now >= changed + holdings.SETTLE_S:
                 self.fetch_queue.put(tuple(wanted))
                 fetch = now + holdings.FETCH_EVERY_S
-            if progress and lacking and now >= said + holdings.PROGRESS_EVERY_S:
-                progress(f"{self.robot}: waiting for {holdings.describe(lacking)}")
+            if progress and not ended and now >= said + holdings.PROGRESS_EVERY_S:
+                progress(f"{self.robot}: waiting for {holdings.describe(lacking, unfinished)}")
                 said = now
             time.sleep(0.05)
         if not self.stopping:
-            self.drain(timeout=max(5.0, seconds))
+            self._wait(self._delivered, max(5.0, seconds))
         mine = self._held()
         # Done: the peers need not wait for us. Where all are done and hold what we told, our
         # leaving says as much, and an advert to each would cost two packets.
         if not (complete and mine == self._told and self.holdings.at_rest(self.robot)):
             self._advertise(mine, holdings.FINAL)
         self.outbox.flush(timeout=max(5.0, seconds))
-        self.transport.close()  # done with the fleet: rejudging it would only cost keep-alives
+        # Done with the fleet: matching what arrived last and rejudging would only cost
+        # keep-alives. The rejudging needs every submap held by the matching stage first.
+        self.transport.close()
+        self._wait(self._matched, max(5.0, end - time.monotonic()))
         if self.config.robot.rejudge and not self.stopping:
             if progress:
                 progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
@@ -234,10 +249,12 @@ class RobotNode(Fetching):
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
     def _advertise(self, counts: dict[str, int], state: str) -> None:
+        done = self.holdings.finished(self.robot, state, counts)
         with self._lock:  # the lingering node and a peer's join both advertise
             self._told, self._told_at, self._told_state = counts, time.monotonic(), state
+            self._told_done = done
             seq, self._adverts = self._adverts, self._adverts + 1
-        advert = holdings.encode(counts, state, self.transport.peers())
+        advert = holdings.encode(counts, state, self.transport.peers(), done)
         self.outbox.put(holdings.KIND, seq, self.door.seal(self.robot, holdings.KIND, seq, advert))
 
     def _publish(self, kind: str, seq: int, payload: bytes) -> None:
@@ -246,19 +263,26 @@ class RobotNode(Fetching):
         if kind == KIND:
             self.counts["sent"] += 1
 
-    def _idle(self) -> bool:
+    def _delivered(self) -> bool:
+        """Nothing that arrived waits to be stored, nothing to fetch, nothing to send."""
+        with self._lock:
+            unkept = self._unkept
+        return unkept == 0 and self.fetch_queue.empty() and not self.outbox.pending()
+
+    def _matched(self) -> bool:
+        """Nothing waits to be matched or optimised."""
         with self._lock:
             busy = self._busy
-        idle = self.inbox.empty() and self.kept.empty() and self.fetch_queue.empty()
-        idle = idle and not self._changed.is_set()
-        idle = idle and not self.outbox.pending()
-        return busy == 0 and idle
+        return busy == 0 and self.kept.empty() and not self._changed.is_set()
 
     def drain(self, timeout: float = 10.0) -> bool:
         """Wait until inbox, fetches and optimisation are idle (True) or ``timeout`` s pass."""
+        return self._wait(lambda: self._delivered() and self._matched(), timeout)
+
+    def _wait(self, done: Callable[[], bool], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and not self.stopping:
-            if self._idle():
+            if done():
                 return True
             time.sleep(0.02)
         return False
@@ -326,6 +350,7 @@ class RobotNode(Fetching):
     def _enqueue(self, item: Arrived) -> None:
         with self._lock:
             self._busy += 1
+            self._unkept += 1
         self.inbox.put(item)
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
@@ -377,11 +402,12 @@ class RobotNode(Fetching):
                 s = self._accept(item)
             except Exception:
                 log.exception("%s: keeping %s/%d failed", self.robot, item.robot, item.seq)
-            if s is None:
-                with self._lock:
+            if s is not None:
+                self.kept.put(s)  # before the count drops: matching is never seen done early
+            with self._lock:
+                self._unkept -= 1
+                if s is None:
                     self._busy -= 1
-            else:
-                self.kept.put(s)
         self.kept.put(None)
 
     def _accept(self, item: Arrived) -> Submap | None:
