@@ -17,22 +17,33 @@ SENDER = ("fleet", "r")
 def test_a_backlog_leaves_the_latest_advert_first_then_the_newest_submaps() -> None:
     gate, sent = threading.Event(), []
 
-    def publish(kind: str, seq: int, payload: bytes) -> None:
+    def publish(kind: str, seq: int, payload: bytes, to) -> None:
         gate.wait(5)  # the link is busy until the backlog is queued
-        sent.append((kind, seq))
+        sent.append((kind, seq) if to is None else (kind, seq, to))
 
     box = Outbox(publish, Budget(None), "have", SENDER)
     box.put("submap", 0, b"x")  # taken at once, held up by the busy link
     time.sleep(0.05)
     for seq in (1, 2, 3):
         box.put("submap", seq, b"x")
-    box.put("have", 0, b"{}")
-    box.put("have", 1, b"{}")
-    assert box.pending() == 5  # the second advert replaced the first
+    box.put("have", 0, b"{}", frozenset({"p"}))
+    box.put("have", 1, b"{}", frozenset({"q"}))
+    box.put("have", 2, b"{}", frozenset({"q"}))  # replaces the one to q, not the one to p
+    assert box.pending() == 6
+    box.put("have", 3, b"{}")  # to all: replaces both
+    assert box.pending() == 5
+    box.put("have", 4, b"{}", frozenset({"p"}))  # the one to all waits on
     gate.set()
     assert box.flush(5)
     box.close()
-    assert sent == [("submap", 0), ("have", 1), ("submap", 3), ("submap", 2), ("submap", 1)]
+    assert sent == [
+        ("submap", 0),
+        ("have", 3),
+        ("have", 4, frozenset({"p"})),
+        ("submap", 3),
+        ("submap", 2),
+        ("submap", 1),
+    ]
 
 
 def test_the_budget_holds_payload_and_keys() -> None:
@@ -42,7 +53,7 @@ def test_the_budget_holds_payload_and_keys() -> None:
     budget = Budget(2000.0)
     take = budget.take
     budget.take = lambda n, stopped=lambda: False: costs.append(n) or take(n, stopped)
-    box = Outbox(lambda kind, seq, payload: None, budget, "have", SENDER)
+    box = Outbox(lambda kind, seq, payload, to: None, budget, "have", SENDER)
     start = time.monotonic()
     for seq in range(10):
         box.put("submap", seq, b"x" * 500)
@@ -63,7 +74,7 @@ def test_a_closed_budget_wait_gives_up() -> None:
 def test_a_failed_publish_is_dropped_and_the_rest_go() -> None:
     sent = []
 
-    def publish(kind: str, seq: int, payload: bytes) -> None:
+    def publish(kind: str, seq: int, payload: bytes, to) -> None:
         if seq == 1:
             raise TransportError("the link is gone")
         sent.append(seq)
@@ -78,7 +89,7 @@ def test_a_failed_publish_is_dropped_and_the_rest_go() -> None:
 
 def _timed_box(bundle: int, wait: float) -> tuple[Outbox, list]:
     sent: list = []
-    publish = lambda kind, seq, payload: sent.append((kind, seq, time.monotonic()))  # noqa: E731
+    publish = lambda kind, seq, payload, to: sent.append((kind, seq, time.monotonic()))  # noqa: E731
     return Outbox(publish, Budget(None), "have", SENDER, bundle, wait), sent
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from conftest import wait
 from gmmap.fleet.keys import (
     FetchRequest,
     fetch_key,
@@ -336,6 +337,32 @@ def test_a_fetch_reaches_only_the_robots_it_names(tmp_path: Path):
             assert served() == [2, 2]
             assert b.fetch("a", "submap", 0, timeout=WAIT, relay=True) == [(0, b"a0")]
             assert served() == [3, 3]
+
+
+def test_a_message_told_to_one_peer_reaches_that_peer_alone():
+    """b tells a alone: a's callbacks get it as a put, c hears nothing; a message told in
+    another robot's name, or by a robot to itself, is ignored."""
+    port_a, port_c = free_port(), free_port()
+    got: dict[str, list] = {"a": [], "c": []}
+    with (
+        Transport(tconfig("lab", "a", port=port_a)) as a,
+        Transport(tconfig("lab", "c", port=port_c)) as c,
+    ):
+        for name, t in (("a", a), ("c", c)):
+            t.serve(lambda robot, kind, since: [])
+            t.subscribe(lambda *m, name=name: got[name].append(m))
+        with Transport(tconfig("lab", "b", connect=[endpoint(port_a), endpoint(port_c)])) as b:
+            assert b.wait_for_peers(["a", "c"], WAIT)
+            b.tell("a", "have", 7, b"news")
+            assert wait(lambda: got["a"] == [("b", "have", 7, b"news")])
+            b.publish("have", 8, b"all")
+            assert wait(lambda: got["c"] == [("b", "have", 8, b"all")])
+            assert got["a"][-1] == ("b", "have", 8, b"all") and len(got["c"]) == 1
+            with raw_session(port_a) as raw:
+                list(raw.get("gmmap/lab/a/have/9/via/a", payload=b"x", timeout=WAIT))
+                list(raw.get("gmmap/lab/b/have/x/via/a", payload=b"x", timeout=WAIT))
+            assert a.stats()["ignored"] == 2 and len(got["a"]) == 2
+        assert a.stats()["received"]["b"]["have"]["messages"] == 2
 
 
 def test_a_fetch_with_a_malformed_held_list_is_ignored(pair):

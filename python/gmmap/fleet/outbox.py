@@ -40,7 +40,7 @@ from gmmap.fleet.keys import data_key
 log = logging.getLogger(__name__)
 
 BURST_S = 1.0  # the bucket holds this many seconds of budget (and at least one message)
-Publish = Callable[[str, int, bytes], None]
+Publish = Callable[[str, int, bytes, "frozenset[str] | None"], None]
 
 
 class Budget:
@@ -72,8 +72,9 @@ class Budget:
 
 class Outbox:
     """Messages waiting to be published, ``urgent`` kind first (the adverts, oldest first),
-    then the rest newest first, sent by one thread through ``publish(kind, seq, payload)``
-    within ``budget``, each costing its payload and its key (``sender``: fleet, robot)."""
+    then the rest newest first, sent by one thread through ``publish(kind, seq, payload,
+    to)`` (``to``: the peers it is for, None: all) within ``budget``, each costing its payload
+    and its key (``sender``: fleet, robot)."""
 
     def __init__(
         self,
@@ -89,24 +90,25 @@ class Outbox:
         self._bundle, self._wait = bundle, bundle_wait
         self._oldest = 0.0  # when the oldest message waiting was queued (monotonic)
         self._open = False  # a bundle is leaving: send until nothing waits
-        self._heap: list[tuple[tuple[int, int], str, int, bytes]] = []
+        self._heap: list[tuple[tuple[int, int], str, int, bytes, frozenset[str] | None]] = []
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._sending = False
         self._thread = threading.Thread(target=self._run, name="gmmap-outbox", daemon=True)
         self._thread.start()
 
-    def put(self, kind: str, seq: int, payload: bytes) -> None:
-        """Queue a message; an urgent one replaces those of its kind still waiting (an advert
+    def put(self, kind: str, seq: int, payload: bytes, to: frozenset[str] | None = None) -> None:
+        """Queue a message for the peers ``to`` (None: all); an urgent one replaces those of
+        its kind still waiting for the same peers, or for any where it goes to all (an advert
         says all a robot holds: only the latest counts)."""
         rank = (0, seq) if kind == self._urgent else (1, -seq)
         with self._cond:
             if not self._heap:
                 self._oldest = time.monotonic()
             if kind == self._urgent:
-                self._heap = [m for m in self._heap if m[1] != kind]
+                self._heap = [m for m in self._heap if m[1] != kind or to not in (None, m[4])]
                 heapq.heapify(self._heap)
-            heapq.heappush(self._heap, (rank, kind, seq, payload))
+            heapq.heappush(self._heap, (rank, kind, seq, payload, to))
             self._cond.notify()
 
     def release(self) -> None:
@@ -118,7 +120,7 @@ class Outbox:
     def held(self, kind: str) -> set[int]:
         """The seqs of ``kind`` waiting here, not yet being sent."""
         with self._cond:
-            return {seq for _, k, seq, _ in self._heap if k == kind}
+            return {m[2] for m in self._heap if m[1] == kind}
 
     def now(self) -> None:
         """Send what waits now (a peer asked for it), bundling again afterwards."""
@@ -165,13 +167,13 @@ class Outbox:
                     self._cond.wait(None if due == math.inf else due)
                 if self._stop.is_set():
                     return
-                _, kind, seq, payload = heapq.heappop(self._heap)
+                _, kind, seq, payload, to = heapq.heappop(self._heap)
                 self._open = bool(self._heap)
                 self._sending = True
             try:
                 key = data_key(*self._sender, kind, seq).encode()
                 if self.budget.take(len(payload) + len(key), self._stop.is_set):
-                    self._publish(kind, seq, payload)
+                    self._publish(kind, seq, payload, to)
             except TransportError as err:  # closing, or the link is gone: the store keeps it
                 log.debug("not sent %s/%d: %s", kind, seq, err)
             finally:

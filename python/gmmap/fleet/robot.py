@@ -16,14 +16,16 @@ Stages, each a thread:
   as an edge.
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
-- **fetch**: when a peer joins, a robot that holds anything tells it what (an advert,
-  `gmmap.fleet.holdings`), and each fetches the robots the other's advert holds more of (from
+- **fetch**: when a peer joins, a robot that holds anything tells it, alone, what (an advert,
+  `gmmap.fleet.holdings`, `gmmap.fleet.lingering`), and each fetches the robots the other's advert holds more of (from
   the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
   that was away catches up from whoever is present, and the submaps of a robot out of its
   reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
   between (`Transport.fetch`, ``via``), even while it maps (`gmmap.fleet.fetching`: while it
   maps it also asks them for the newest of a robot that fell quiet). Robots that meet fresh
   send neither.
+- **ending** (`gmmap.fleet.lingering`): after its frames the node lingers, telling its peers
+  what it holds, until they hold the same and every robot it knows of is done mapping.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -53,6 +55,7 @@ from gmmap.fleet.credentials import load_for
 from gmmap.fleet.door import Door
 from gmmap.fleet.events import Arrived, Built, BuiltCallback, sizes_of
 from gmmap.fleet.fetching import KIND, Fetching
+from gmmap.fleet.lingering import Lingering
 from gmmap.fleet.outbox import Budget, Outbox
 from gmmap.fleet.records import edge_of
 from gmmap.fleet.reload import reload
@@ -71,7 +74,7 @@ META_FRAMES = "frames_consumed"
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
-class RobotNode(Fetching):
+class RobotNode(Fetching, Lingering):
     """One robot: ``start()``, feed it with ``run(frames)`` (or ``start_frames``), ``stop()``.
 
     ``config.robot`` names it, its fleet and its store; ``config.transport`` its endpoints;
@@ -106,6 +109,7 @@ class RobotNode(Fetching):
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
         self._told_done: dict[str, int] = {}  # the robots done mapping our last advert named
+        self._joiners: dict[str, float] = {}  # peers that joined, not yet told: when
         self._told_state = self._state = holdings.MAPPING
         self._closed, self._live = False, None
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
@@ -177,89 +181,15 @@ class RobotNode(Fetching):
         if self._live is not None:
             self._live.close()
 
-    def linger(self, seconds: float, progress: Callable | None = None) -> bool:
-        """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
-        no more, and every robot we know of is done mapping and its last submap is here
-        (`gmmap.fleet.holdings`), or ``robot.deadline`` s; True if complete. Then leave the
-        fleet, and finish matching."""
-        if self.stopping:
-            return False
-        start = time.monotonic()
-        end = start + max(seconds, self.config.robot.deadline)
-        seen, changed, fetch, said, complete = None, start, start, start, False
-        self._state = holdings.LINGER
-        # Our last submaps leave now, and our news with them: in one batch, one ACK.
-        self._advertise(self._held(), holdings.LINGER)
-        self.outbox.release()
-        while not self.stopping and (now := time.monotonic()) < end:
-            mine = self._held()
-            present = self.transport.peers()
-            lacking = self.holdings.lacking(mine, present)
-            done = self.holdings.finished(self.robot, holdings.LINGER, mine)
-            unfinished = self.holdings.unfinished(self.robot, done, mine)
-            if mine != seen:
-                seen, changed = mine, now
-            # In a mesh, one advert once submaps stop arriving says it all; a relay tells at once.
-            quiet = now >= changed + holdings.SETTLE_S or self.holdings.relaying(mine, present)
-            news = quiet and self.holdings.is_news(
-                mine,
-                self._told,
-                self._told_state,
-                present,
-                self.arrivals.quiet(present),
-                (done, self._told_done),
-            )
-            if holdings.advert_due(now, news, self._told_at):
-                self._advertise(mine, holdings.LINGER)
-            # The final advert may not make it out before the session closes: the last one must.
-            settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
-            ended = not lacking and not unfinished
-            if now >= start + seconds and settled and ended and self._delivered():
-                complete = True
-                break
-            wanted = holdings.wanted(self.holdings.adverts(), mine)
-            # Only what a peer says it holds more of, and not while submaps are arriving anyway.
-            if now >= fetch and wanted and now >= changed + holdings.SETTLE_S:
-                self.fetch_queue.put(tuple(wanted))
-                fetch = now + holdings.FETCH_EVERY_S
-            if progress and not ended and now >= said + holdings.PROGRESS_EVERY_S:
-                progress(f"{self.robot}: waiting for {holdings.describe(lacking, unfinished)}")
-                said = now
-            time.sleep(0.05)
-        if not self.stopping:
-            self._wait(self._delivered, max(5.0, seconds))
-        mine = self._held()
-        # Done: the peers need not wait for us. Where all are done and hold what we told, our
-        # leaving says as much, and an advert to each would cost two packets.
-        if not (complete and mine == self._told and self.holdings.at_rest(self.robot)):
-            self._advertise(mine, holdings.FINAL)
-        self.outbox.flush(timeout=max(5.0, seconds))
-        # Done with the fleet: matching what arrived last and rejudging would only cost
-        # keep-alives. The rejudging needs every submap held by the matching stage first.
-        self.transport.close()
-        self._wait(self._matched, max(5.0, end - time.monotonic()))
-        if self.config.robot.rejudge and not self.stopping:
-            if progress:
-                progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
-            self.mapper = self.mapper.rejudged()
-            self.store.replace_edges(edge_of(m) for m in self.mapper.matches)
-        return complete
-
     def _held(self) -> dict[str, int]:
         return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
-    def _advertise(self, counts: dict[str, int], state: str) -> None:
-        done = self.holdings.finished(self.robot, state, counts)
-        with self._lock:  # the lingering node and a peer's join both advertise
-            self._told, self._told_at, self._told_state = counts, time.monotonic(), state
-            self._told_done = done
-            seq, self._adverts = self._adverts, self._adverts + 1
-        advert = holdings.encode(counts, state, self.transport.peers(), done)
-        self.outbox.put(holdings.KIND, seq, self.door.seal(self.robot, holdings.KIND, seq, advert))
-
-    def _publish(self, kind: str, seq: int, payload: bytes) -> None:
+    def _publish(self, kind: str, seq: int, payload: bytes, to: frozenset[str] | None) -> None:
         """The outbox's way out (its thread): a submap counts as sent once published."""
-        self.transport.publish(kind, seq, payload)
+        if to is None:
+            self.transport.publish(kind, seq, payload)
+        for peer in sorted(to or ()):
+            self.transport.tell(peer, kind, seq, payload)
         if kind == KIND:
             self.counts["sent"] += 1
 
@@ -366,17 +296,6 @@ class RobotNode(Fetching):
                 wanted = [r for r in wanted if self.arrivals.relayed(r, self.transport.peers())]
             if wanted:
                 self.fetch_queue.put(tuple(wanted))
-
-    def _joined(self, peer: str) -> None:
-        """A peer joined: tell it what we hold once its subscriber is surely declared."""
-        self.arrivals.met(peer)
-        if any(self._held().values()):  # else it missed nothing: what we build, it hears
-            threading.Timer(holdings.SETTLE_S, self._tell, (time.monotonic(),)).start()
-
-    def _tell(self, joined: float) -> None:  # unless an advert reached it
-        held = self._held() if not self.stopping else {}
-        if any(held.values()) and self._told_at < joined + holdings.SETTLE_S / 2:
-            self._advertise(held, self._state)
 
     def _matching(self) -> None:
         try:

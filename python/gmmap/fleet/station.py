@@ -70,7 +70,7 @@ class StationNode(RobotNode):
     def _serve(self) -> None:  # answers no fetch
         pass
 
-    def _advertise(self, counts: dict[str, int], state: str) -> None:  # tells nothing
+    def _advertise(self, counts, state, to=None) -> None:  # tells nothing
         pass
 
     def _joined(self, peer: str) -> None:

@@ -3,6 +3,7 @@
 Key expressions (``<fleet>``, ``<robot>``, ``<kind>`` are names, ``<seq>`` a decimal integer ≥ 0)::
 
     gmmap/<fleet>/<robot>/<kind>/<seq>     one message (a put); payload = the encoded bytes
+    gmmap/<fleet>/<robot>/<kind>/<seq>/via/<r>  the same, told to robot r alone (a query)
     gmmap/<fleet>/<robot>                  liveliness token: the robot is present
     gmmap/<fleet>/<robot>/<kind>/*/via/<r>?since=N;held=5-7,9  fetch query (below)
     gmmap/<fleet>/*/<kind>/*/via/*?since=0;skip=a,b  every robot held but a and b (`fetch_unknown`)
@@ -16,6 +17,8 @@ keyed ``…/<robot>/<kind>/<seq>/via/<r>``. Every robot that called :meth:`Trans
 answers those that name it from its store, for its own data and for others' it holds: a robot
 that was away catches up from whoever is present, and robots in between hand on the data of a
 robot the asker cannot reach (multi-hop). Zenoh sends a query only to the robots it names.
+So a message for one peer alone (`Transport.tell`) is a query on its queryable that carries
+the message, whose empty answer ends it: its callbacks get it as they get a put.
 
 Byte accounting (:meth:`Transport.stats`): per data robot and per kind, in each direction,
 
@@ -56,15 +59,11 @@ from gmmap.fleet.keys import (
     as_payload,
     check_seq,
     data_key,
-    fetch_selector,
     free_port,
     parse_data_key,
-    parse_fetch,
-    parse_reply_key,
-    queryable_key,
-    reply_key,
 )
 from gmmap.fleet.outbox import Budget
+from gmmap.fleet.querying import DEFAULT_KIND, FetchProvider, Querying, Roster
 from gmmap.fleet.session import open_session
 from gmmap.fleet.worker import Worker, call_logged
 from gmmap.names import NAME_RE, check_name
@@ -88,16 +87,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DEFAULT_KIND = "submap"
-
 MessageCallback = Callable[[str, str, int, bytes], None]
 """``callback(robot, kind, seq, payload)`` for a message of another robot of the fleet."""
 PeerCallback = Callable[[str], None]
 """``callback(robot)`` when a robot of the fleet joins or leaves."""
-FetchProvider = Callable[[str, str, int], Iterable[tuple[int, bytes]]]
-"""``provider(robot, kind, since_seq)`` → the held ``(seq, payload)`` pairs with seq ≥ since_seq."""
-Roster = Callable[[], Iterable[str]]
-"""``roster()`` → the robots whose messages are held."""
 
 
 @dataclass(frozen=True)
@@ -116,7 +109,7 @@ class TransportConfig:
         check_name("robot", self.robot)
 
 
-class Transport:
+class Transport(Querying):
     """One robot's Zenoh peer session: publish, subscribe, presence and fetch of opaque bytes.
 
     The session opens on construction; use it as a context manager (or call :meth:`close`)::
@@ -256,21 +249,19 @@ class Transport:
         # Zenoh thread: parse, count, enqueue; nothing slow.
         try:
             key = str(sample.key_expr)
-            parsed = parse_data_key(key)
-            if (
-                parsed is None
-                or sample.kind != zenoh.SampleKind.PUT
-                or parsed[0] != self.fleet
-                or parsed[1] == self.robot
-            ):
-                self._counters.bump("ignored")
-                return
-            _, robot, kind, seq = parsed
-            payload = sample.payload.to_bytes()
-            self._counters.add("received", robot, kind, len(payload), len(key.encode()), False)
-            self._events.submit(self._deliver, robot, kind, seq, payload)
+            parsed = parse_data_key(key) if sample.kind == zenoh.SampleKind.PUT else None
+            self._take(key, parsed, sample.payload.to_bytes())
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
+
+    def _take(self, key: str, parsed: tuple[str, str, str, int] | None, payload: bytes) -> None:
+        """A message of another robot of the fleet (put, or told: `tell`): count and queue it."""
+        if parsed is None or parsed[0] != self.fleet or parsed[1] == self.robot:
+            self._counters.bump("ignored")
+            return
+        _, robot, kind, seq = parsed
+        self._counters.add("received", robot, kind, len(payload), len(key.encode()), False)
+        self._events.submit(self._deliver, robot, kind, seq, payload)
 
     def _deliver(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         with self._lock:
@@ -330,158 +321,6 @@ class Transport:
             callbacks = list(self._join_callbacks if joined else self._leave_callbacks)
         for callback in callbacks:
             self._events.submit(call_logged, callback, robot)
-
-    # ---- fetch ------------------------------------------------------------------------------
-
-    def serve(
-        self, provider: FetchProvider, roster: Roster | None = None, budget: Budget | None = None
-    ) -> None:
-        """Answer other robots' fetch queries with ``provider(robot, kind, since_seq)``, which
-        returns the ``(seq, payload)`` pairs held (own or received) with seq ≥ since_seq, and,
-        with ``roster()`` (the robots held), `fetch_unknown` queries, each reply within
-        ``budget``. It runs on the transport's query thread. Calling again replaces all."""
-        self._check_open()
-        if not callable(provider):
-            raise TransportConfigError(f"provider must be callable; got {provider!r}")
-        if roster is not None and not callable(roster):
-            raise TransportConfigError(f"roster must be callable; got {roster!r}")
-        with self._lock:
-            self._provider, self._roster, self._budget = provider, roster, budget or Budget(None)
-        with self._declare_lock:
-            if self._queryable is not None:
-                return
-            self._queryable = self._session.declare_queryable(
-                queryable_key(self.fleet, self.robot),
-                self._on_query,
-                complete=False,
-                allowed_origin=zenoh.Locality.REMOTE,
-            )
-
-    def _on_query(self, query: zenoh.Query) -> None:
-        # Zenoh thread: keep the query object alive and answer it on the query worker.
-        self._queries.submit(self._answer, query)
-
-    def _answer(self, query: zenoh.Query) -> None:
-        try:
-            request = parse_fetch(str(query.key_expr), query.parameters)
-            if request is None or request.fleet != self.fleet:
-                self._counters.bump("ignored")
-                return
-            robot, kind = request.robot, request.kind
-            with self._lock:
-                provider, roster, budget = self._provider, self._roster, self._budget
-            if provider is None or self._closed:
-                return
-            self._counters.bump("queries_served")
-            try:
-                every = roster() if roster and robot == "*" else ()  # fetch_unknown
-                robots = sorted(set(every) - request.skip) if robot == "*" else [robot]
-                found = [(r, s, p) for r in robots for s, p in provider(r, kind, request.since)]
-            except Exception as err:
-                log.exception("gmmap transport: fetch provider failed for %s/%s", robot, kind)
-                query.reply_err(f"provider failed: {err}".encode())
-                return
-            found = sorted(h for h in found if request.wants(h[1]))
-            for r, seq, payload in found:  # oldest first: a fetch cut short resumes at its gap
-                data, key = as_payload(payload), reply_key(self.fleet, r, kind, seq, self.robot)
-                if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
-                    return
-                query.reply(key, data)
-                self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
-        finally:
-            # Finalises the query: the requester's get() ends without waiting for its timeout.
-            try:
-                query.drop()
-            except Exception:  # already finalised by Zenoh (the session closing): harmless
-                log.debug("dropping a fetch query failed", exc_info=True)
-
-    def fetch(
-        self,
-        robot: str,
-        kind: str = DEFAULT_KIND,
-        since_seq: int = 0,
-        timeout: float | None = None,
-        relay: bool = False,
-        via: str | None = None,
-        held: Iterable[int] = (),
-    ) -> list[tuple[int, bytes]]:
-        """Ask ``robot`` for its messages of ``kind`` with seq ≥ ``since_seq``, but those
-        ``held`` already; or, with ``relay`` (or where ``robot`` is not present), the robots in
-        between: ``via`` alone where given, else every peer holding them. Returns ``(seq,
-        payload)`` sorted by seq, the first reply per seq winning, of what arrived within
-        ``timeout`` s (default ``config.fetch_timeout``); no peer serving gives an empty list."""
-        self._check_open()
-        check_name("robot", robot)
-        check_name("kind", kind)
-        check_seq(since_seq, "since_seq")
-        if via is not None:
-            check_name("via", via)
-        else:
-            via = "*" if relay or robot not in self.peers() else robot
-        found = self._query(
-            fetch_selector(self.fleet, robot, kind, via, since_seq, held),
-            timeout,
-            lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
-        )
-        return sorted((seq, payload) for (_, seq), payload in found.items())
-
-    def fetch_unknown(
-        self, known: Iterable[str], kind: str = DEFAULT_KIND, timeout: float | None = None
-    ) -> dict[str, list[tuple[int, bytes]]]:
-        """Ask the present peers for the messages of ``kind`` of every robot not in ``known``:
-        how a robot that joins late learns of robots that left before it came. Returns
-        ``{robot: [(seq, payload)]}`` sorted by seq, the first reply per message winning."""
-        self._check_open()
-        check_name("kind", kind)
-        skip = sorted({check_name("robot", r) for r in known})
-        found = self._query(
-            fetch_selector(self.fleet, "*", kind, "*", skip=skip),
-            timeout,
-            lambda p: p[0] == self.fleet and p[2] == kind and p[1] not in skip,
-        )
-        out: dict[str, list[tuple[int, bytes]]] = {}
-        for (robot, seq), payload in sorted(found.items()):
-            out.setdefault(robot, []).append((seq, payload))
-        return out
-
-    def _query(
-        self,
-        selector: str,
-        timeout: float | None,
-        accept: Callable[[tuple[str, str, str, int]], bool],
-    ) -> dict[tuple[str, int], bytes]:
-        """Sends a fetch query and keeps the first reply per (robot, seq) whose key ``accept``
-        takes, counting each as received."""
-        timeout = self.config.options.fetch_timeout if timeout is None else float(timeout)
-        if not timeout > 0:
-            raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
-        self._counters.bump("queries_sent")
-        try:
-            replies = self._session.get(
-                selector,
-                target=zenoh.QueryTarget.ALL,
-                consolidation=zenoh.ConsolidationMode.NONE,
-                timeout=timeout,
-                allowed_destination=zenoh.Locality.REMOTE,
-            )
-        except zenoh.ZError as err:
-            raise TransportError(f"cannot query {selector}: {err}") from err
-        found: dict[tuple[str, int], bytes] = {}
-        for reply in replies:
-            if (sample := reply.ok) is None:
-                why = reply.err.payload.to_bytes().decode(errors="replace")  # "Timeout"
-                log.warning("gmmap transport: a peer failed to answer %s: %s", selector, why)
-                continue
-            key = str(sample.key_expr)
-            parsed = parse_reply_key(key)
-            if parsed is None or not accept(parsed):
-                self._counters.bump("ignored")
-                continue
-            _, robot, kind, seq = parsed
-            payload = sample.payload.to_bytes()
-            self._counters.add("received", robot, kind, len(payload), len(key.encode()), True)
-            found.setdefault((robot, seq), payload)
-        return found
 
     # ---- accounting -------------------------------------------------------------------------
 
