@@ -1,19 +1,18 @@
 """What each robot holds, told to its peers, so that a robot ends only once the peers in reach
 hold what it holds and it holds what they hold (`gmmap.fleet.robot.RobotNode.linger`).
 
-An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``: how many submaps of each robot
-the sender holds, its state, the robots it hears directly, and the robots it knows to be done
+An advert is the message ``gmmap/<fleet>/<robot>/have/<n>``: how many submaps of each robot the
+sender holds, its state, the robots it hears directly, and the robots it knows to be done
 mapping with how many submaps each built, in a few bytes per robot (`encode`; the layout is in
-docs/wire-format.md, "Adverts"). Counts, not sets: a
-robot's submaps are numbered from 0 and a peer that holds as many holds the same ones unless a
-gap is still being filled, which the next advert shows. The state is ``mapping`` while the
-sender's own frames last, then ``linger`` while it waits for its peers, and ``final`` in its
-last advert: it is done (none is needed where its last ``linger`` one said all,
-`Holdings.at_rest`). A peer that vanished without a final one (a partition, a crash) is still
-waited for, by its last advert, until the deadline. The robots done mapping travel on from
-advert to advert (`Holdings.finished`), so that a robot at one end of a chain knows when one
-at the other end, which it never hears, has built its last submap, and waits until it holds
-that one too (`Holdings.unfinished`). A malformed or oversized advert is
+docs/wire-format.md, "Adverts"). Counts, not sets: a robot's submaps are numbered from 0 and a
+peer that holds as many holds the same ones unless a gap is still being filled, which the next
+advert shows. The state is ``mapping`` while the sender's own frames last, then ``linger`` while
+it waits for its peers, and ``final`` in its last advert: it is done (none is needed where its
+last ``linger`` one said all, `Holdings.at_rest`). A peer that vanished without a final one (a
+partition, a crash) is still waited for, by its last advert, until the deadline. The robots done
+mapping travel on from advert to advert (`Holdings.finished`), so that a robot at one end of a
+chain knows when one at the other end, which it never hears, has built its last submap, and
+waits until it holds that one too (`Holdings.unfinished`). A malformed or oversized advert is
 ignored, never trusted.
 """
 

@@ -17,13 +17,13 @@ Stages, each a thread:
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
 - **fetch**: when a peer joins, a robot that holds anything tells it, alone, what (an advert,
-  `gmmap.fleet.holdings`, `gmmap.fleet.lingering`), and each fetches the robots the other's advert holds more of (from
-  the first gap, else from the latest seq + 1); it serves fetches from its store, so a robot
-  that was away catches up from whoever is present, and the submaps of a robot out of its
-  reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come through the robots in
-  between (`Transport.fetch`, ``via``), even while it maps (`gmmap.fleet.fetching`: while it
-  maps it also asks them for the newest of a robot that fell quiet). Robots that meet fresh
-  send neither.
+  `gmmap.fleet.holdings`, `gmmap.fleet.lingering`), and each fetches the robots the other's
+  advert holds more of (from the first gap, else from the latest seq + 1); it serves fetches
+  from its store, so a robot that was away catches up from whoever is present, and the submaps
+  of a robot out of its reach, or present but silent or quiet (`gmmap.fleet.arrivals`), come
+  through the robots in between (`Transport.fetch`, ``via``), even while it maps
+  (`gmmap.fleet.fetching`: while it maps it also asks them for the newest of a robot that fell
+  quiet). Robots that meet fresh send neither.
 - **ending** (`gmmap.fleet.lingering`): after its frames the node lingers, telling its peers
   what it holds, until they hold the same and every robot it knows of is done mapping.
 
