@@ -201,23 +201,24 @@ def test_the_end_of_a_chain_waits_for_the_last_submaps_of_the_other_end(tmp_path
 
 
 def test_a_peer_that_joins_is_told_what_we_hold_and_the_others_are_not(tmp_path, frames):
-    """a and b met holding nothing, then mapped; c joins them: each tells c alone what it
-    holds (a put would reach the other too), and c fetches from each."""
-    pa, pb = free_port(), free_port()
+    """a, b and d met holding nothing, then a and b mapped; c joins them: a and b each tell c
+    alone what they hold (a put would reach the two others too), and c fetches from each."""
+    pa, pb, pd = free_port(), free_port(), free_port()
     a, b = node(tmp_path, "a", pa), node(tmp_path, "b", pb, [pa])
-    for n in (a, b):
+    d = node(tmp_path, "d", pd, [pa, pb])
+    for n in (a, b, d):
         n.start()
-    assert wait(lambda: a.transport.peers() == ["b"])
+    assert wait(lambda: a.transport.peers() == ["b", "d"] and b.transport.peers() == ["a", "d"])
     a.start_frames(frames[0:2]).join()
     b.start_frames(frames[2:4]).join()
     assert wait(lambda: a.store.seqs("b") == [0] and b.store.seqs("a") == [0])
-    c = node(tmp_path, "c", free_port(), [pa, pb])
+    c = node(tmp_path, "c", free_port(), [pa, pb, pd])
     c.start()
     assert wait(lambda: c.store.seqs("a") == [0] and c.store.seqs("b") == [0])
     received = c.transport.stats()["received"]
     assert received["a"]["have"]["messages"] == received["b"]["have"]["messages"] == 1
-    assert "have" not in a.transport.stats()["received"].get("b", {})
-    assert "have" not in b.transport.stats()["received"].get("a", {})
+    for n, other in ((a, "b"), (b, "a"), (d, "a"), (d, "b")):
+        assert "have" not in n.transport.stats()["received"].get(other, {}), (n.robot, other)
 
 
 def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):

@@ -4,7 +4,8 @@ it holds (`gmmap.fleet.holdings`), and when it leaves the fleet.
 - When a peer joins while the robot holds anything, it tells that peer what it holds, SETTLE_S
   later (the peer's queryable is surely declared by then), unless an advert to all reached it
   since. The others know it already, so the advert goes to the peers that joined alone
-  (`Transport.tell`), or to all where all did, as after a restart.
+  (`Transport.tell`), or to all where at least half of them did (three robots, or all
+  joining at once after a restart): there one put costs no more.
 - After its frames it lingers (`Lingering.linger`): it tells all what it holds when that is
   news to one of them, and ends once the peers in reach hold what it holds and it holds what
   they hold, and every robot it knows of is done mapping and its last submap is here, or at
@@ -100,9 +101,11 @@ class Lingering:
         self, counts: dict[str, int], state: str, to: frozenset[str] | None = None
     ) -> None:
         """Tell the peers ``to`` (None: all) what we hold; only what all were told is
-        remembered as told."""
+        remembered as told. A put goes once to every peer, a message told to one peer alone
+        is a query and its empty answer on its link: to half the peers or more, a put costs
+        no more."""
         peers = self.transport.peers()
-        to = None if to is not None and set(peers) <= to else to
+        to = None if to is not None and 2 * len(to & set(peers)) >= len(peers) else to
         done = self.holdings.finished(self.robot, state, counts)
         with self._lock:  # the lingering node and a peer's join both advertise
             if to is None:
@@ -123,8 +126,7 @@ class Lingering:
 
     def _tell(self) -> None:
         """Tell the peers that joined SETTLE_S ago what we hold, unless an advert to all
-        reached them since: to them alone (to all where all joined, as after a restart), as
-        the others know it already."""
+        reached them since: to them alone, as the others know it already (`_advertise`)."""
         now = time.monotonic()
         with self._lock:
             due = {p: t for p, t in self._joiners.items() if t + holdings.SETTLE_S <= now + 0.1}
