@@ -113,7 +113,7 @@ class Querying:
             key = str(query.key_expr)
             if query.payload is not None:  # a message told to us alone
                 if not self._closed:
-                    self._take(key, parse_reply_key(key), query.payload.to_bytes())
+                    self._take(key, parse_reply_key(key), query.payload)
                 return
             request = parse_fetch(key, query.parameters)
             if request is None or request.fleet != self.fleet:

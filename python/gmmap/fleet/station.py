@@ -70,7 +70,9 @@ class StationNode(RobotNode):
     def _serve(self) -> None:  # answers no fetch
         pass
 
-    def _advertise(self, counts, state, to=None) -> None:  # tells nothing
+    def _advertise(  # tells nothing
+        self, counts: dict[str, int], state: str, to: frozenset[str] | None = None
+    ) -> None:
         pass
 
     def _joined(self, peer: str) -> None:

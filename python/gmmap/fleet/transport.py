@@ -250,16 +250,18 @@ class Transport(Querying):
         try:
             key = str(sample.key_expr)
             parsed = parse_data_key(key) if sample.kind == zenoh.SampleKind.PUT else None
-            self._take(key, parsed, sample.payload.to_bytes())
+            self._take(key, parsed, sample.payload)
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
 
-    def _take(self, key: str, parsed: tuple[str, str, str, int] | None, payload: bytes) -> None:
-        """A message of another robot of the fleet (put, or told: `tell`): count and queue it."""
+    def _take(self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes) -> None:
+        """A message of another robot of the fleet (put, or told: `tell`): count and queue it
+        (its payload copied only once it is taken)."""
         if parsed is None or parsed[0] != self.fleet or parsed[1] == self.robot:
             self._counters.bump("ignored")
             return
         _, robot, kind, seq = parsed
+        payload = data.to_bytes()
         self._counters.add("received", robot, kind, len(payload), len(key.encode()), False)
         self._events.submit(self._deliver, robot, kind, seq, payload)
 
