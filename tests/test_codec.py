@@ -17,9 +17,11 @@ from hypothesis import strategies as st
 
 import gmmap
 from gmmap import DecodeError, Gmm, InvalidInputError
+from gmmap.fleet import anchor as anchors_codec
 from gmmap.fleet import codec
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps, level
+from gmmap.math.geometry import rotation_angle
 
 D = codec.DEFAULT_DISTORTION
 QMIN = math.ldexp(1.0, -codec.QMIN_EXPONENT)
@@ -128,6 +130,9 @@ def test_submap_round_trip_keeps_identity_fields() -> None:
     yawed[:2, :2] = [[math.cos(0.3), -math.sin(0.3)], [math.sin(0.3), math.cos(0.3)]]
     yawed[:3, 3] = [1.2, 0.6, 1.5]
     anchors.append(yawed)
+    scaled = yawed.copy()
+    scaled[:3, :3] *= 1.5  # not rigid: sent entry by entry, exactly
+    anchors.append(scaled)
     stamps = 1305031102.175304 + np.cumsum(rng.uniform(0.02, 0.05, 7))
     for i, anchor in enumerate(anchors):
         s = Submap("robot-ü", 41 + i, anchor, stamps, 12345, random_gmm(30, seed=i))
@@ -135,7 +140,13 @@ def test_submap_round_trip_keeps_identity_fields() -> None:
         out = gmmap.decode(gmmap.encode(s))
         assert isinstance(out, Submap)
         assert (out.robot, out.seq, out.n_points) == ("robot-ü", 41 + i, 12345)
-        assert np.array_equal(out.anchor, anchor) and out.anchor.dtype == np.float64
+        assert out.anchor.dtype == np.float64 and (out.anchor[3] == [0, 0, 0, 1]).all()
+        if anchor is scaled:
+            assert np.array_equal(out.anchor, anchor)
+        else:
+            assert np.abs(out.anchor[:3, 3] - anchor[:3, 3]).max() <= 2.0**-14
+            assert rotation_angle(out.anchor[:3, :3].T @ anchor[:3, :3]) < 2e-6
+            assert np.allclose(out.anchor[:3, :3].T @ out.anchor[:3, :3], np.eye(3), atol=1e-14)
         assert out.stamps[0] == stamps[0]
         tol = 2.0**-24 * np.abs(stamps - stamps[0]) + 2 * np.spacing(stamps[0])
         assert np.all(np.abs(out.stamps - stamps) <= tol)
@@ -143,13 +154,35 @@ def test_submap_round_trip_keeps_identity_fields() -> None:
         assert out.gmm.l2_correlation(s.gmm) > 0.99
 
 
-def test_levelled_anchor_is_compact() -> None:
+def test_anchors_are_compact() -> None:
     yawed = level(np.linalg.qr(np.random.default_rng(0).normal(size=(3, 3)))[0], (0, 0, 1))
     anchor = np.eye(4)
     anchor[:3, :3], anchor[:3, 3] = yawed[:3, :3], [0.5, 0.25, 1.75]
     w = codec._Writer()
-    codec._write_anchor(w, anchor)
-    assert len(w.buf) == 5 + 5 * 8 + 2  # c and −s once, the translation, two references
+    anchors_codec.write_anchor(w, anchor)
+    # The form, a quaternion's x and y (0) and z or w (3 bytes), a translation under 128 m.
+    assert len(w.buf) <= 1 + 1 + 1 + 3 + 3 * 3
+    general = np.eye(4)
+    general[:3, :3] = random_rotations(1, np.random.default_rng(2))[0]
+    w = codec._Writer()
+    anchors_codec.write_anchor(w, general)
+    assert len(w.buf) <= 1 + 3 * 3 + 3
+
+
+def test_version_1_messages_still_decode() -> None:
+    """Stores hold version-1 messages: the same but for the anchor, its entry codes alone."""
+    s = Submap("r", 3, level(np.eye(4), (0, 0, 1)), np.array([5.0, 6.0]), 9, random_gmm(5))
+    s.anchor[:3, 3] = [1.0 / 3.0, 2.0, -7.25]
+    new = gmmap.encode(s)
+    w = codec._Writer()
+    anchors_codec.write_anchor(w, s.anchor)
+    start = new.index(bytes(w.buf))
+    exact = codec._Writer()
+    anchors_codec.write_anchor_entries(exact, s.anchor)
+    old = new[:4] + b"\x01" + new[5:start] + bytes(exact.buf) + new[start + len(w.buf) :]
+    out = gmmap.decode(old)
+    assert np.array_equal(out.anchor, s.anchor)
+    assert np.array_equal(out.gmm.means, gmmap.decode(new).gmm.means)
 
 
 def test_edge_cases_round_trip() -> None:
@@ -296,6 +329,9 @@ def test_hostile_counts_fail_fast() -> None:
         submap_prefix + uvarint(2**31),  # stamp count
         submap_prefix + uvarint(65535) + bytes(8),  # stamps that are not there
         header(codec.KIND_SUBMAP) + b"\x02\xff\xfe",  # not UTF-8
+        submap_prefix + uvarint(0) + b"\x05",  # anchor form 5
+        submap_prefix + uvarint(0) + b"\x04" + uvarint(2 * 800_000) * 3,  # |q| > 1
+        submap_prefix + uvarint(0) + b"\x04" + uvarint(2 * 2**21),  # a component over 1
         gmmap.encode(random_gmm(4)) + b"\x00",  # trailing byte
     ]
     for data in hostile:
@@ -305,7 +341,7 @@ def test_hostile_counts_fail_fast() -> None:
 
 def test_non_finite_values_are_rejected() -> None:
     s = Submap("r", 1, np.eye(4), np.array([98765.4321, 98766.0]), 3, random_gmm(5))
-    s.anchor = s.anchor.copy()
+    s.anchor = np.diag([2.0, 2.0, 2.0, 1.0])  # not rigid: its entries travel as float64
     s.anchor[0, 3] = 1234.5678
     data = gmmap.encode(s)
     for value, replacement in ((98765.4321, math.nan), (1234.5678, math.inf)):

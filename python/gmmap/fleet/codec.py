@@ -7,8 +7,8 @@
 - an envelope: magic ``GMMW``, version, kind (mixture or submap), compression (none or zstd,
   whichever is smaller);
 - for a submap: robot name, sequence number, point count, stamps (the first as float64, the others
-  as float32 offsets from it), the anchor (entries 0, ±1 and ± repeats as 3-bit codes, others
-  as float64);
+  as float32 offsets from it), the anchor (a rigid one as a quantised quaternion and
+  translation, about 15 bytes; any other entry by entry, exactly);
 - the mixture, quantised so that each of the K components' ten parameters adds the same
   expected KL divergence D/K to the mixture (about 10·D nats in all, D = ``distortion``), and
   entropy coded:
@@ -54,6 +54,7 @@ import numpy as np
 import zstandard
 
 from gmmap.errors import DecodeError, InvalidGmmError, InvalidInputError
+from gmmap.fleet.anchor import read_anchor, read_anchor_entries, write_anchor
 from gmmap.fleet.bitstream import (
     _BitReader,
     _BitWriter,
@@ -81,7 +82,8 @@ if TYPE_CHECKING:
     from gmmap.mapping.submap import Submap
 
 MAGIC = b"GMMW"
-VERSION = 1
+VERSION = 2
+READABLE = (1, 2)  # version 1 differs only in the anchor: its entry codes, without a form byte
 KIND_GMM, KIND_SUBMAP = 1, 2
 COMPRESSION_NONE, COMPRESSION_ZSTD = 0, 1
 DEFAULT_DISTORTION = 1e-3  # expected KL divergence (nats) per parameter, over all components
@@ -173,8 +175,8 @@ def _decode(data: bytes) -> Gmm | Submap:
     if data[:4] != MAGIC:
         raise DecodeError("not a gmmap wire message (bad magic)")
     version, kind, compression = data[4], data[5], data[6]
-    if version != VERSION:
-        raise DecodeError(f"unsupported wire version {version} (this decoder reads {VERSION})")
+    if version not in READABLE:
+        raise DecodeError(f"unsupported wire version {version} (this decoder reads {READABLE})")
     if kind not in (KIND_GMM, KIND_SUBMAP):
         raise DecodeError(f"unknown message kind {kind}")
     if compression == COMPRESSION_ZSTD:
@@ -188,7 +190,7 @@ def _decode(data: bytes) -> Gmm | Submap:
         return _decode_gmm(r)
     from gmmap.mapping.submap import Submap
 
-    fields = _read_submap_fields(r)
+    fields = _read_submap_fields(r, version)
     return Submap(**fields, gmm=_decode_gmm(r), points=None, gt_anchor=None, stats={})
 
 
@@ -231,11 +233,11 @@ def _submap_fields(s: Submap) -> bytes:
     w.svarint(seq)
     w.uvarint(n_points)
     _write_stamps(w, s.stamps)
-    _write_anchor(w, s.anchor)
+    write_anchor(w, s.anchor)
     return bytes(w.buf)
 
 
-def _read_submap_fields(r: _Reader) -> dict:
+def _read_submap_fields(r: _Reader, version: int) -> dict:
     n = r.uvarint("robot name length", MAX_ROBOT_BYTES)
     try:
         robot = r.take(n, "robot name").decode("utf-8")
@@ -246,7 +248,7 @@ def _read_submap_fields(r: _Reader) -> dict:
         "seq": r.svarint("seq", 1 << 62),
         "n_points": r.uvarint("n_points", (1 << 63) - 1),
         "stamps": _read_stamps(r),
-        "anchor": _read_anchor(r),
+        "anchor": read_anchor(r) if version >= 2 else read_anchor_entries(r),
     }
 
 
@@ -274,61 +276,6 @@ def _read_stamps(r: _Reader) -> np.ndarray:
     if not np.isfinite(t).all():
         raise DecodeError("stamps are not finite")
     return t
-
-
-# 3-bit codes of the anchor's 12 upper entries: exact 0, 1, −1, a float64 that follows, or a
-# copy (4) or negated copy (5) of an earlier entry whose index follows: a rotation repeats its
-# entries (a levelled anchor is [[c, −s, 0], [s, c, 0], [0, 0, 1]]), so this sends 5 doubles.
-_ANCHOR_CONSTANTS = (0.0, 1.0, -1.0)
-_LITERAL, _COPY, _NEGATED = 3, 4, 5
-
-
-def _write_anchor(w: _Writer, anchor: object) -> None:
-    A = np.asarray(anchor, dtype=np.float64)
-    if A.shape != (4, 4) or not np.isfinite(A).all() or not (A[3] == [0, 0, 0, 1]).all():
-        raise InvalidInputError("anchor must be a finite 4x4 matrix with last row [0, 0, 0, 1]")
-    entries = [float(v) for v in A[:3].reshape(-1)]
-    mask, tail = 0, bytearray()
-    for i, v in enumerate(entries):
-        code, extra = _anchor_code(entries, i, v)
-        mask |= code << (3 * i)
-        tail += extra
-    w.raw(mask.to_bytes(5, "little") + bytes(tail))
-
-
-def _anchor_code(entries: list[float], i: int, v: float) -> tuple[int, bytes]:
-    if v in _ANCHOR_CONSTANTS:
-        return _ANCHOR_CONSTANTS.index(v), b""
-    bits = struct.pack("<d", v)
-    for j in range(i):  # bitwise equality, so the copy is exact
-        if struct.pack("<d", entries[j]) == bits:
-            return _COPY, bytes([j])
-        if struct.pack("<d", -entries[j]) == bits:
-            return _NEGATED, bytes([j])
-    return _LITERAL, bits
-
-
-def _read_anchor(r: _Reader) -> np.ndarray:
-    mask = int.from_bytes(r.take(5, "anchor codes"), "little")
-    if mask >> 36:
-        raise DecodeError("anchor codes: unused bits set")
-    top: list[float] = []
-    for i in range(12):
-        code = (mask >> (3 * i)) & 7
-        if code < _LITERAL:
-            top.append(_ANCHOR_CONSTANTS[code])
-        elif code == _LITERAL:
-            top.append(struct.unpack("<d", r.take(8, "anchor entry"))[0])
-        elif code in (_COPY, _NEGATED):
-            j = r.u8("anchor reference")
-            if j >= i:
-                raise DecodeError("anchor entry refers to a later entry")
-            top.append(top[j] if code == _COPY else -top[j])
-        else:
-            raise DecodeError(f"unknown anchor code {code}")
-    if not np.isfinite(top).all():
-        raise DecodeError("anchor is not finite")
-    return np.vstack([np.reshape(top, (3, 4)), [0.0, 0.0, 0.0, 1.0]])
 
 
 # --- steps and radices shared by encoder and decoder (IEEE basic operations only) -----------
