@@ -31,7 +31,7 @@
   IEEE-754 basic operations only (no libm), so every decoder derives them bit for bit.
 
 Decoded components come in the order of their grid cells' Morton codes (not the encoder's
-order). At the default D = 1e-3 a 100-component TUM submap takes about 920 bytes, against
+order). At the default D = 1e-3 a 100-component TUM submap takes about 870 bytes, against
 4,000 as float32 (see benchmarks/codec.py for the figures and the registration accuracy).
 
 The decoder checks every length, count and range before it allocates or loops (at most
