@@ -15,9 +15,9 @@ from gmmap.math.geometry import matrix_to_quaternion, quaternion_to_matrix
 
 # A rigid anchor (version 2) is quantised: a unit quaternion by its three smallest components
 # (the largest, made positive, follows from them) in steps of 2^-20, about 2 µrad of rotation,
-# and the translation in steps of 2^-13 m (0.12 mm, the finest mean step): about 15 bytes for a
-# levelled anchor, against 47 as float64. The owner too uses the decoded anchor (it decodes its
-# own message), so every robot's pose graph starts from the same numbers.
+# and the translation in steps of 2^-13 m (0.12 mm, the finest mean step): 13 bytes for a
+# levelled anchor of the demo's office, against 47 as float64. The owner too uses the decoded
+# anchor (it decodes its own message), so every robot's pose graph starts from the same numbers.
 _ANCHOR_EXACT = 0  # form 0: the entry codes below; forms 1-4: rigid, largest component x/y/z/w
 _QUAT_BITS = 20
 _TRANSLATION_BITS = 13  # the codec's finest mean step (QMIN_EXPONENT)

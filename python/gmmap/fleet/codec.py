@@ -8,7 +8,7 @@
   whichever is smaller);
 - for a submap: robot name, sequence number, point count, stamps (the first as float64, the others
   as float32 offsets from it), the anchor (a rigid one as a quantised quaternion and
-  translation, about 15 bytes; any other entry by entry, exactly);
+  translation, 13 to 19 bytes; any other entry by entry, exactly);
 - the mixture, quantised so that each of the K components' ten parameters adds the same
   expected KL divergence D/K to the mixture (about 10·D nats in all, D = ``distortion``), and
   entropy coded:
