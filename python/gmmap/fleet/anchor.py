@@ -11,6 +11,7 @@ import numpy as np
 
 from gmmap.errors import DecodeError, InvalidInputError
 from gmmap.fleet.bitstream import _Reader, _Writer
+from gmmap.fleet.quantise import QMIN_EXPONENT
 from gmmap.math.geometry import matrix_to_quaternion, quaternion_to_matrix
 
 # A rigid anchor (version 2) is quantised: a unit quaternion by its three smallest components
@@ -20,7 +21,7 @@ from gmmap.math.geometry import matrix_to_quaternion, quaternion_to_matrix
 # anchor (it decodes its own message), so every robot's pose graph starts from the same numbers.
 _ANCHOR_EXACT = 0  # form 0: the entry codes below; forms 1-4: rigid, largest component x/y/z/w
 _QUAT_BITS = 20
-_TRANSLATION_BITS = 13  # the codec's finest mean step (QMIN_EXPONENT)
+_TRANSLATION_BITS = QMIN_EXPONENT
 _MAX_TRANSLATION = 1 << 53  # steps; 2^40 m
 _RIGID_TOLERANCE = 1e-6  # |RᵀR − I| and |det R − 1| below which an anchor is sent as rigid
 
@@ -60,7 +61,8 @@ def read_anchor(r: _Reader) -> np.ndarray:
         return read_anchor_entries(r)
     if form > 4:
         raise DecodeError(f"unknown anchor form {form}")
-    small = np.array([r.svarint("anchor rotation", 1 << 20) for _ in range(3)]) * 2.0**-_QUAT_BITS
+    steps = [r.svarint("anchor rotation", 1 << _QUAT_BITS) for _ in range(3)]
+    small = np.array(steps, dtype=np.float64) * 2.0**-_QUAT_BITS
     rest = 1.0 - float(small @ small)
     if rest < 0.0:
         raise DecodeError("anchor rotation is not a unit quaternion")

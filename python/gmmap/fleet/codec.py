@@ -67,6 +67,7 @@ from gmmap.fleet.bitstream import (
     _Writer,
 )
 from gmmap.fleet.quantise import (
+    QMIN_EXPONENT,
     _bin,
     _bin_centre,
     _from_octahedral,
@@ -104,7 +105,6 @@ GRID_BITS = 20  # cells per axis < 2^20, so Morton codes < 2^60
 MAX_ORIGIN = 1 << 50
 CELL_EXPONENT = -4  # default cell 2^-4 m = 6.25 cm
 CELL_EXPONENT_RANGE = (-30, 60)
-QMIN_EXPONENT = 13  # the finest mean step: 2^-13 m ≈ 0.12 mm
 MAX_QMIN_EXPONENT = 60
 LOG_FLOOR_SCALE = 64  # the log-std floor is sent in 1/64 nat
 MAX_COORD = 1e12  # metres; means beyond are rejected by the encoder

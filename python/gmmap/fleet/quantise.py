@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+QMIN_EXPONENT = 13  # the finest mean step, 2^-13 m ≈ 0.12 mm; also the anchor's translation step
+
 # --- Morton codes ----------------------------------------------------------------------------
 
 _SPREAD = (
