@@ -7,7 +7,8 @@ separate processes) with one counting relay between every two linked robots
 i + 1 only: the others' submaps go through the robots in between) and a router (every robot
 a Zenoh client of one router, linked to it alone), rendezvous links (up only while two
 robots are within 8 m, or in line of sight, the robots moving in step at twice their speed;
-`gmmap.fleet.links.Rendezvous`) and perfect links with robot 1 killed with SIGKILL after its
+`gmmap.fleet.links.Rendezvous`; Zenoh over UDP there, as the demo runs them, and the 8 m case
+once more over TCP) and perfect links with robot 1 killed with SIGKILL after its
 third submap and restarted on its store, and perfect links over the first 100 frames (the
 difference to the whole run is what one more delivered submap costs on the wire, the
 sessions' set-up and the ending apart). Per case: submaps lost
@@ -21,7 +22,8 @@ time, the time until every robot held every submap, the bytes on the wire per de
 submap (headers, ACKs, Zenoh's framing, adverts and fetches included; goal <= 1,000 B) and
 whether the robots end holding the same submaps, groups and pose-graph matches as on
 perfect links, and how far apart their optimised anchors end (m). Also the
-bytes and packets an idle link between two robots carries per minute, and the bytes on the
+bytes and packets an idle link between two robots carries per minute, over TCP and over UDP,
+and the bytes on the
 wire per 750 B submap sent alone or in bundles of 2 to 6 (`RobotOptions.bundle`). With
 ``--plots DIR``, each robot count's map completeness over time, one curve per case
 (``completeness_<n>_robots.png``). On rendezvous links a robot that ends out of everyone's
@@ -48,7 +50,7 @@ from gmmap.cli.demo import backend_follows_drift, run_demo
 from gmmap.config import Config
 from gmmap.eval.fleetplots import completeness, plot_completeness
 from gmmap.eval.wire import delivered
-from gmmap.options import LinkOptions, RobotOptions, SimOptions
+from gmmap.options import LinkOptions, RobotOptions, SimOptions, TransportOptions
 
 CASES = {
     "perfect": LinkOptions(emulate=True),
@@ -61,9 +63,11 @@ CASES = {
     "router": LinkOptions(topology="router"),
     "rendezvous_8m": LinkOptions(range_m=8.0),
     "rendezvous_sight": LinkOptions(line_of_sight=True),
+    "rendezvous_8m_tcp": LinkOptions(range_m=8.0),
     "kill_9": LinkOptions(emulate=True),
     "perfect_100_frames": LinkOptions(emulate=True),
 }
+PROTOCOL = {"rendezvous_8m_tcp": "tcp"}  # else the demo's: UDP on rendezvous links, TCP on others
 CRASH = {"kill_9": (1, 3)}  # robot 1 killed after its third submap, restarted on its store
 # The same perfect links over the first 100 frames only: what the rest of the run adds per
 # submap is the cost of one more submap, once the sessions are set up.
@@ -76,7 +80,11 @@ RENDEZVOUS_DEADLINE_S = 30.0
 def case(robots: int, name: str) -> dict:
     link = CASES[name]
     deadline = RENDEZVOUS_DEADLINE_S if link.rendezvous else 180.0
-    base = Config(sim=SimOptions(robots=robots), robot=RobotOptions(linger=2.0, deadline=deadline))
+    base = Config(
+        sim=SimOptions(robots=robots),
+        robot=RobotOptions(linger=2.0, deadline=deadline),
+        transport=TransportOptions(protocol=PROTOCOL.get(name)),
+    )
     config = backend_follows_drift(replace(base, link=link))
     with tempfile.TemporaryDirectory() as out:
         said: list[str] = []
@@ -141,14 +149,15 @@ def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
 
 
 @contextlib.contextmanager
-def _pair(tmp: str):
+def _pair(tmp: str, protocol: str = "tcp"):
     """Two robots' transports, b reaching a through a counting relay, both serving a store
     and subscribed: (relay, a, b, messages b received)."""
     from gmmap.fleet.links import relayed_pair
     from gmmap.fleet.store import Store
 
     got: list[int] = []
-    with Store(Path(tmp) / "a.db") as store, relayed_pair("idle") as (relay, a, b):
+    pair = relayed_pair("idle", protocol=protocol)
+    with Store(Path(tmp) / "a.db") as store, pair as (relay, a, b):
         for t in (a, b):
             t.serve(store.fetch_provider, store.robots)
         a.subscribe(lambda *_: None)
@@ -166,10 +175,10 @@ def _wire(relay, before) -> dict[str, int]:
     }
 
 
-def idle(seconds: float) -> dict:
+def idle(seconds: float, protocol: str = "tcp") -> dict:
     """What two robots' transports (presence, subscription, fetch service) put on the link
     between them while neither has anything to send, per minute, in both directions."""
-    with tempfile.TemporaryDirectory() as tmp, _pair(tmp) as (relay, *_):
+    with tempfile.TemporaryDirectory() as tmp, _pair(tmp, protocol) as (relay, *_):
         before = relay.counts()
         time.sleep(seconds)
         wire = _wire(relay, before)
@@ -218,7 +227,9 @@ def main() -> None:
     parser.add_argument("--idle-s", type=float, default=60.0, help="Idle link measured (s).")
     args = parser.parse_args()
     out: dict = {"idle_link_per_minute": idle(args.idle_s)}
-    print(f"idle link: {out['idle_link_per_minute']}", file=sys.stderr, flush=True)
+    out["idle_link_per_minute_udp"] = idle(args.idle_s, "udp")
+    print(f"idle link: {out['idle_link_per_minute']}, over UDP {out['idle_link_per_minute_udp']}",
+          file=sys.stderr, flush=True)  # fmt: skip
     out["wire_bytes_per_submap_by_bundle"] = bundles()
     print(f"bundles: {out['wire_bytes_per_submap_by_bundle']}", file=sys.stderr, flush=True)
     for robots in (int(n) for n in args.robots.split(",")):

@@ -11,8 +11,11 @@ from gmmap.fleet.holdings import LINGER, MAPPING
 class Node(Fetching):
     """A robot "a" whose peers ``present`` are, of which ``quiet`` sent nothing of late."""
 
-    def __init__(self, present, quiet, states=None, held=None, state=MAPPING, adverts=None):
+    def __init__(
+        self, present, quiet, states=None, held=None, state=MAPPING, adverts=None, latest=None
+    ):
         self.robot, self.stopping, self._state = "a", False, state
+        self.lossy = latest is not None  # the newest seq each robot sent us itself
         self._lock, self.counts = threading.Lock(), {"fetched": 0}
         self.asked: list[tuple] = []
         self.answers: dict[str | None, list] = {}  # what a fetch via each robot returns
@@ -25,6 +28,9 @@ class Node(Fetching):
             add=lambda r, s: True,
             now=lambda: 0.0,
             on_its_way=lambda r, since: False,
+            latest=lambda r: (latest or {}).get(r, -1),
+            patient=False,
+            unanswered=lambda r, asked: False,
         )
         self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: adverts or {})
         held = {"b": 3, "c": 3} if held is None else held
@@ -58,6 +64,15 @@ def test_a_probe_asks_the_robots_in_between_without_an_advert() -> None:
     assert node.asked == []
     node._fetch(set(node._stalled()), probe=True)
     assert node.asked == [("b", 3, True, None)]  # from its first gap, every holder answering
+
+
+def test_on_a_lossy_link_a_gap_behind_a_robots_newest_submap_is_fetched_from_it() -> None:
+    node = Node(["b", "c"], quiet=set(), held={"b": 3}, latest={"b": 5})
+    node._fetch({"b"})  # b's submap 5 came, 3 and 4 did not: b holds them
+    assert node.asked == [("b", 3, False, None)]
+    node = Node(["b", "c"], quiet=set(), held={"b": 3})
+    node._fetch({"b"})  # on a link that holds what it cannot carry yet, nothing to ask
+    assert node.asked == []
 
 
 def test_a_relayed_fetch_asks_the_one_peer_we_hear_holding_the_most() -> None:

@@ -14,23 +14,27 @@ from gmmap.errors import InvalidInputError, TransportConfigError
 from gmmap.names import MODES, check_endpoint, check_name
 
 TOPOLOGIES = ("mesh", "chain", "router")
+PROTOCOLS = ("tcp", "udp")
 
 
 @dataclass(frozen=True)
 class TransportOptions:
     """Where a robot's Zenoh session listens and whom it connects to (`gmmap.fleet.transport`).
 
-    ``listen`` None means one loopback endpoint ``tcp/127.0.0.1:<port>``; ``port`` 0 picks a free
-    ephemeral port when the transport opens. Multicast scouting is off by default so that
-    fleets on one network only meet through ``connect`` endpoints (Zenoh's gossip still lets
-    peers of peers find each other). ``zenoh_options`` are raw Zenoh configuration entries
-    (``{"transport/link/tx/lease": 5000}``) applied last.
+    ``listen`` None means one loopback endpoint ``<protocol>/127.0.0.1:<port>``; ``port`` 0 picks
+    a free ephemeral port when the transport opens. ``protocol``: ``tcp`` (None: TCP, or TLS in a
+    secured fleet) or ``udp``, datagrams: no ACKs, handshakes or retransmission stalls, for
+    links that come and go (what a datagram lost, fetches recover; no TLS over it). Multicast
+    scouting is off by default so that fleets on one network only meet through ``connect``
+    endpoints (Zenoh's gossip still lets peers of peers find each other). ``zenoh_options``
+    are raw Zenoh configuration entries (``{"transport/link/tx/lease": 5000}``) applied last.
     """
 
     listen: tuple[str, ...] | None = None
     port: int = 0
     connect: tuple[str, ...] = ()
     mode: str = "peer"
+    protocol: str | None = None
     multicast_scouting: bool = False
     fetch_timeout: float = 2.0
     zenoh_options: Mapping[str, Any] = field(default_factory=dict)
@@ -38,6 +42,10 @@ class TransportOptions:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise TransportConfigError(f"mode must be one of {MODES}; got {self.mode!r}")
+        if self.protocol is not None and self.protocol not in PROTOCOLS:
+            raise TransportConfigError(
+                f"protocol must be one of {PROTOCOLS} or null; got {self.protocol!r}"
+            )
         if isinstance(self.port, bool) or not isinstance(self.port, int):
             raise TransportConfigError(f"port must be an integer; got {self.port!r}")
         if not 0 <= self.port <= 65535:

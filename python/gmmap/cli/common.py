@@ -11,6 +11,7 @@ import click
 import numpy as np
 
 from gmmap.config import Config, load_config
+from gmmap.fleet_options import PROTOCOLS
 from gmmap.options import SENSORS, RosOptions, drift_overrides
 
 SEP = "__"  # a flag's parameter name is its config key with '.' → '__'
@@ -190,6 +191,13 @@ BUNDLE = setting(
     "Own submaps sent together, each waiting up to robot.bundle_wait s (unset: 3, or 1 on "
     "the demo's rendezvous links).",
     type=click.IntRange(min=1),
+)
+PROTOCOL = setting(
+    "--protocol",
+    "transport.protocol",
+    "Zenoh over tcp, or udp datagrams: no ACKs or handshakes, what a lost datagram carried is "
+    "fetched again; not secured (unset: tcp, or udp on the demo's rendezvous links).",
+    type=click.Choice(PROTOCOLS),
 )
 DESCRIPTOR = setting(
     "--descriptor",

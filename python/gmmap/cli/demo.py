@@ -29,6 +29,7 @@ from gmmap.cli.common import (
     BUDGET,
     BUNDLE,
     MIN_MATCHES,
+    PROTOCOL,
     as_json_option,
     config_option,
     log,
@@ -77,7 +78,7 @@ def run_demo(
     if out is None:
         out = Path(tempfile.mkdtemp(prefix="gmmap-demo-"))
     out.mkdir(parents=True, exist_ok=True)
-    config = paced(config)
+    config = paced(config, secure)
     sim = config.sim
     names = [f"robot_{i}" for i in range(sim.robots)]
     for name in names:  # a demo starts afresh: robots would resume from an earlier run's stores
@@ -94,7 +95,7 @@ def run_demo(
         from gmmap.fleet.session import open_router
 
         ports.append(listen_port())
-        router = open_router(ports[-1])
+        router = open_router(ports[-1], protocol=_protocol(config))
     reach = rendezvous(config, max_frames)
     relays = _start_relays(config, ports, reach)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
@@ -159,17 +160,25 @@ def run_demo(
     return report
 
 
-def paced(config: Config) -> Config:
+def paced(config: Config, secure: bool = False) -> Config:
     """With rendezvous links the robots move in step (`SimOptions.pace`, `RENDEZVOUS_PACE`
-    unless set), from a common start a moment from now, once the processes are up, and send
-    each submap at once (`RobotOptions.bundle` 1 unless set): a contact may last a second."""
+    unless set), from a common start a moment from now, once the processes are up, send
+    each submap at once (`RobotOptions.bundle` 1 unless set): a contact may last a second,
+    and talk over UDP (`TransportOptions.protocol`, unless set or ``secure``: TLS needs TCP):
+    a link that comes and goes costs no handshakes, ACKs or retransmissions."""
     sim = config.sim
     if not config.link.rendezvous:
         return config
     pace = sim.pace or RENDEZVOUS_PACE
     robot = replace(config.robot, bundle=config.robot.bundle or 1)
+    protocol = config.transport.protocol or ("tcp" if secure else "udp")
+    transport = replace(config.transport, protocol=protocol)
     sim = replace(sim, pace=pace, start=time.time() + STARTUP_S)
-    return replace(config, sim=sim, robot=robot)
+    return replace(config, sim=sim, robot=robot, transport=transport)
+
+
+def _protocol(config: Config) -> str:
+    return config.transport.protocol or "tcp"
 
 
 def rendezvous(config: Config, max_frames: int | None = None):
@@ -233,13 +242,14 @@ def _start_relays(config: Config, ports: list[int], reach=None) -> dict:
     """With emulated links, one relay per linked pair (i < j, `LinkOptions.pairs`) in front
     of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it,
     and with rendezvous links (``reach``) only while they are in reach of each other."""
-    from gmmap.fleet.links import Relay
+    from gmmap.fleet.links import relay_for
 
     if not config.link.shaped:
         return {}
     pairs = config.link.pairs(config.sim.robots)
+    relay = relay_for(_protocol(config))
     return {
-        (i, j): Relay(
+        (i, j): relay(
             ("127.0.0.1", ports[j]), config.link, gate=reach.gate(i, j) if reach else None
         ).start()
         for i, j in pairs
@@ -283,7 +293,7 @@ def _robot_config(
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
-        peers = tuple(f"tcp/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+        peers = tuple(f"{_protocol(config)}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
     transport = replace(
         config.transport, mode=mode, listen=listen, port=ports[i], connect=peers,
         zenoh_options=zenoh,
@@ -413,6 +423,7 @@ def format_report(r: dict) -> str:
 @setting("--linger", "robot.linger", "Seconds robots stay after their frames.", type=float)
 @BUDGET
 @BUNDLE
+@PROTOCOL
 @setting(
     "--deadline",
     "robot.deadline",

@@ -15,6 +15,7 @@ from gmmap.cli.common import (
     FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
     MIN_MATCHES,
+    PROTOCOL,
     config_option,
     frame_options,
     log,
@@ -60,6 +61,7 @@ from gmmap.config import Config
 @setting("--linger", "robot.linger", "Seconds to stay after mapping.", type=float)
 @BUDGET
 @BUNDLE
+@PROTOCOL
 @setting(
     "--deadline", "robot.deadline", "Latest end after mapping, peers complete or not.", type=float
 )
@@ -100,7 +102,9 @@ def command(
     from gmmap.fleet.runner import run_robot
 
     if config.security.credentials is None:
-        log(f"{config.robot.name}: plain TCP, submaps unsigned (no --credentials: a trusted lab)")
+        plain = (config.transport.protocol or "tcp").upper()
+        why = "no --credentials: a trusted lab"
+        log(f"{config.robot.name}: plain {plain}, submaps unsigned ({why})")
     if sum((data is not None, simulated, ros2, ros1)) != 1:
         raise click.UsageError("give exactly one of --data, --sim, --ros2 and --ros1")
     bridge = None

@@ -56,7 +56,8 @@ def command(
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     node.start()
-    secured = "secured" if config.security.credentials else "plain TCP"
+    plain = f"plain {(config.transport.protocol or 'tcp').upper()}"
+    secured = "secured" if config.security.credentials else plain
     log(f"{o.name}: watching fleet {config.robot.fleet} ({secured}); view at {view.url or '-'}"
         f" (data: {view.data_url})")  # fmt: skip
     end = None if duration is None else time.monotonic() + duration

@@ -7,7 +7,8 @@ def wire_report(relays: dict, names: list[str], deliveries: int) -> dict:
     """What the relays carried: per robot the packets it put on its links and their bytes,
     headers included (``bytes``), the payload under them (``payload_bytes``: Zenoh's framing,
     keep-alives and queries, what the relay read), the bytes it took off them; per link each
-    direction; and the bytes per submap delivered to a peer (``deliveries`` in all)."""
+    direction, with the datagrams a datagram link dropped; and the bytes per submap delivered
+    to a peer (``deliveries`` in all)."""
     keys = ("bytes", "packets", "payload_bytes", "received_bytes", "chunks")
     wire = {n: dict.fromkeys(keys, 0) for n in names}
     links = []
@@ -27,6 +28,7 @@ def wire_report(relays: dict, names: list[str], deliveries: int) -> dict:
             "robots": [a, b],
             "bytes": [c["forward"].wire_bytes, c["backward"].wire_bytes],
             "packets": [c["forward"].packets, c["backward"].packets],
+            "dropped": [c["forward"].dropped, c["backward"].dropped],
         })  # fmt: skip
     total = sum(sum(link["bytes"]) for link in links)
     return {

@@ -48,6 +48,17 @@ class Arrivals:
             self._heard[robot] = self._clock()
             self._latest.pop(robot, None)  # what it sent before is no guide to what is on its way
 
+    def hear(self, robot: str) -> None:
+        """``robot`` sent us something itself (an advert): it is neither silent nor quiet."""
+        with self._lock:
+            self._silent.discard(robot)
+            self._heard[robot] = self._clock()
+
+    def latest(self, robot: str) -> int:
+        """The newest seq ``robot`` sent us itself since it joined; -1 if none."""
+        with self._lock:
+            return self._latest.get(robot, -1)
+
     def add(self, robot: str, seq: int, direct: bool = False) -> bool:
         """Notes that ``robot``'s ``seq`` arrived (``direct``: from that robot itself, which is
         then not silent); False if it had arrived already."""

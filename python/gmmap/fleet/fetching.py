@@ -45,7 +45,7 @@ LANDING_S = 1.0
 
 class Fetching:
     """The fetch thread of `RobotNode`, a mixin: it uses the node's ``robot``, ``store``,
-    ``transport``, ``arrivals``, ``holdings``, ``door``, ``fetch_queue``, ``counts``,
+    ``transport``, ``arrivals``, ``holdings``, ``door``, ``fetch_queue``, ``counts``, ``lossy``,
     ``_lock``, ``_state``, ``stopping`` and ``_enqueue``."""
 
     def _fetcher(self) -> None:
@@ -121,8 +121,11 @@ class Fetching:
         a peer holds."""
         held = self.arrivals.held(r, self.store.seqs(r))
         since = self.arrivals.since(r, held)
-        # The adverts count what is stored; what is still queued here counts as arrived.
+        # The adverts count what is stored; what is still queued here counts as arrived. On a
+        # lossy link, its newest submap that came from it says it holds all before.
         told = max((h.get(r, 0) for h in self.holdings.adverts().values()), default=0)
+        if self.lossy:
+            told = max(told, self.arrivals.latest(r) + 1)
         return held, since, told
 
     def _later(self, r: str) -> None:

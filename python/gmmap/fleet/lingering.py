@@ -26,8 +26,8 @@ class Lingering:
     """Adverts and the ending of `RobotNode`, a mixin: it uses the node's ``robot``,
     ``config``, ``store``, ``mapper``, ``transport``, ``outbox``, ``arrivals``, ``holdings``,
     ``door``, ``fetch_queue``, ``_lock``, ``_state``, ``_adverts``, ``_told``, ``_told_at``,
-    ``_told_state``, ``_told_done``, ``_joiners``, ``stopping``, ``_held``, ``_delivered``,
-    ``_matched`` and ``_wait``."""
+    ``_told_state``, ``_told_done``, ``_joiners``, ``lossy``, ``stopping``, ``_held``,
+    ``_delivered``, ``_matched`` and ``_wait``."""
 
     def linger(self, seconds: float, progress: Callable | None = None) -> bool:
         """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
@@ -123,6 +123,22 @@ class Lingering:
             with self._lock:
                 self._joiners[peer] = time.monotonic()
             threading.Timer(holdings.SETTLE_S, self._tell).start()
+
+    def _heard_again(self, peer: str, seq: int | None) -> None:
+        """A message of ``peer`` (its submap ``seq``, or an advert) on a lossy link: where we
+        had not heard it for a while, its link came back, and what we sent it meanwhile is
+        lost: tell it what we hold (it fetches what it lacks), and take its next advert as a
+        first one. Where its submap is newer than one we lack, fetch the gap from it now: the
+        meeting may be short."""
+        present = self.transport.peers()
+        if peer in self.arrivals.quiet(present) and peer in present:
+            self.holdings.meet(peer)
+            self.arrivals.hear(peer)
+            held = self._held()
+            if any(held.values()) and not self.stopping:
+                self._advertise(held, self._state, frozenset({peer}))
+        if seq is not None and seq > self.arrivals.since(peer, self.store.seqs(peer)):
+            self.fetch_queue.put((peer,))
 
     def _tell(self) -> None:
         """Tell the peers that joined SETTLE_S ago what we hold, unless an advert to all

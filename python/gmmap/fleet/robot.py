@@ -106,6 +106,9 @@ class RobotNode(Fetching, Lingering):
         bundled = config.robot.bundle_size > 1
         self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
         self.holdings = holdings.Holdings()  # what the peers say they hold
+        # Datagrams sent while a link was down are lost, not held: a robot heard again is
+        # caught up with at once (`Lingering._heard_again`).
+        self.lossy = config.transport.protocol == "udp"
         # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
         self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
         self._told_done: dict[str, int] = {}  # the robots done mapping our last advert named
@@ -286,6 +289,8 @@ class RobotNode(Fetching, Lingering):
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         if not self.door.admit(robot, kind, seq, payload):
             return
+        if self.lossy:
+            self._heard_again(robot, seq if kind == KIND else None)
         if kind == KIND:
             if self.arrivals.add(robot, seq, direct=True):  # else a duplicate, or a replay
                 self._enqueue(Arrived("received", robot, seq, payload))

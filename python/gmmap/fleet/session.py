@@ -69,7 +69,11 @@ def open_session(
     Zenoh cannot open it."""
     # A port we pick ourselves may be taken between free_port() and Zenoh's bind: retry.
     attempts = 3 if options.listen is None and options.port == 0 else 1
-    protocol = "tcp" if credentials is None else "tls"
+    if credentials is not None and options.protocol == "udp":
+        raise TransportConfigError(
+            "a secured robot's links are TLS over TCP: transport.protocol udp cannot carry them"
+        )
+    protocol = "tls" if credentials is not None else options.protocol or "tcp"
     for attempt in range(attempts):
         listen_endpoints = (
             options.listen
@@ -90,10 +94,10 @@ def open_session(
     raise AssertionError("unreachable")
 
 
-def open_router(port: int, host: str = "127.0.0.1") -> zenoh.Session:
-    """A Zenoh session in router mode listening on ``host:port``: robots in client mode
-    connect to it and it routes between them."""
-    endpoint = f"tcp/{host}:{port}"
+def open_router(port: int, host: str = "127.0.0.1", protocol: str = "tcp") -> zenoh.Session:
+    """A Zenoh session in router mode listening on ``protocol/host:port``: robots in client
+    mode connect to it and it routes between them."""
+    endpoint = f"{protocol}/{host}:{port}"
     cfg = zenoh.Config()
     for key, value in (("mode", "router"), ("listen/endpoints", [endpoint]),
                        ("scouting/multicast/enabled", False), *LEASE.items()):  # fmt: skip
