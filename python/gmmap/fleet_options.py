@@ -127,8 +127,9 @@ class LinkOptions:
     With ``emulate`` (or any shaping set) each pair of robots talks through its own relay,
     which counts every byte Zenoh puts on the link and, in both directions: caps it at
     ``rate`` bytes/s (None: no cap), delays it by ``delay_s``, stalls a chunk for ``stall_s``
-    with probability ``loss`` (TCP's retransmission after a loss) and moves nothing during the
-    ``outages``, (start, end) seconds after the relays start. ``topology``: ``mesh``, a link
+    with probability ``loss`` (TCP's retransmission after a loss; over UDP the datagram is
+    dropped) and moves nothing during the ``outages``, (start, end) seconds after the relays
+    start. ``topology``: ``mesh``, a link
     between every two robots; ``chain``, robot i linked to i + 1 only, so that the others'
     submaps reach a robot only through those in between; ``router``, every robot a Zenoh
     client of one Zenoh router, linked to it alone (the topology of larger fleets).

@@ -435,7 +435,12 @@ def format_report(r: dict) -> str:
 )
 @setting("--link-rate", "link.rate", "Emulated links' cap, bytes/s each way.", type=float)
 @setting("--link-delay", "link.delay_s", "Emulated links' one-way delay (s).", type=float)
-@setting("--link-loss", "link.loss", "Emulated links' loss (a TCP stall) per chunk.", type=float)
+@setting(
+    "--link-loss",
+    "link.loss",
+    "Emulated links' loss per chunk: a TCP stall, or a dropped datagram over UDP.",
+    type=float,
+)
 @setting(
     "--link-topology",
     "link.topology",

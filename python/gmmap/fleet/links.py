@@ -22,6 +22,11 @@ takes in what a sender sends while the link is down, and the relay holds it unti
 returns; what it never passes on (the link stayed down, or the session ended) is not counted:
 a link out of reach would not have carried it.
 
+Zenoh over UDP (`TransportOptions.protocol`) goes through a `DatagramRelay` instead: there a
+lost datagram is missing, and what meets an outage or a closed rendezvous link is dropped, as
+a radio out of range drops it; each datagram is counted with its UDP, IPv4 and Ethernet
+headers, per IP fragment.
+
 Peers in Zenoh's peer mode tell each other where they listen (gossip) and would connect
 directly, around the relay; a fleet behind relays turns gossip off
 (``ZENOH_NO_GOSSIP``, for `TransportOptions.zenoh_options`).

@@ -25,6 +25,13 @@ from gmmap.fleet.keys import free_port
 from gmmap.options import TransportOptions
 
 LEASE = {"transport/link/tx/lease": 60_000, "transport/link/tx/keep_alive": 4}  # ms; per lease
+# Over UDP nothing holds a handshake until the link is up: one sent while it is down is lost,
+# and Zenoh would wait 10 s for its answer, then back off to 4 s between tries. A meeting
+# may last seconds: try every second, each try given a second.
+DATAGRAM_RETRY = {
+    "transport/unicast/open_timeout": 1_000,
+    "connect/retry": {"period_init_ms": 1_000, "period_max_ms": 1_000, "period_increase_factor": 1},
+}
 
 
 def zenoh_config(
@@ -39,6 +46,7 @@ def zenoh_config(
         "connect/endpoints": list(options.connect),
         "scouting/multicast/enabled": options.multicast_scouting,
         **LEASE,
+        **(DATAGRAM_RETRY if options.protocol == "udp" else {}),
     }
     if credentials is not None:
         plain = [e for e in (*listen_endpoints, *options.connect) if not e.startswith("tls/")]
