@@ -49,19 +49,23 @@ class Fetching:
     ``_lock``, ``_state``, ``stopping`` and ``_enqueue``."""
 
     def _fetcher(self) -> None:
+        # The probe keeps its time however busy the fetches are: gaps fetched one after
+        # another must not put off asking about a robot that fell quiet.
+        probe_at = time.monotonic() + holdings.FETCH_EVERY_S
         while not self.stopping:
-            try:
-                items = [self.fetch_queue.get(timeout=holdings.FETCH_EVERY_S)]
-            except queue.Empty:
-                self._fetch(set(self._stalled()), probe=True)
-                continue
-            # One round serves every request queued meanwhile.
+            items = []
             with contextlib.suppress(queue.Empty):
+                items.append(self.fetch_queue.get(timeout=max(0.0, probe_at - time.monotonic())))
+                # One round serves every request queued meanwhile.
                 while True:
                     items.append(self.fetch_queue.get_nowait())
             if None in items:
                 return
-            self._fetch({r for i in items for r in i})
+            if items:
+                self._fetch({r for i in items for r in i})
+            if time.monotonic() >= probe_at:
+                self._fetch(set(self._stalled()), probe=True)
+                probe_at = time.monotonic() + holdings.FETCH_EVERY_S
 
     def _fetch(self, robots: set[str], probe: bool = False) -> None:
         robots -= {self.robot}

@@ -130,8 +130,7 @@ class Lingering:
         lost: tell it what we hold (it fetches what it lacks), and take its next advert as a
         first one. Where its submap is newer than one we lack, fetch the gap from it now: the
         meeting may be short."""
-        present = self.transport.peers()
-        if peer in self.arrivals.quiet(present) and peer in present:
+        if peer in self.arrivals.quiet(self.transport.peers()):
             self.holdings.meet(peer)
             self.arrivals.hear(peer)
             held = self._held()
