@@ -87,7 +87,7 @@ DESCRIPTIONS: dict[str, str] = {
 }
 ORDER = tuple(DESCRIPTIONS)
 MAX_LIST = 25  # longer lists of scalars are shortened in the page (the JSON has them all)
-MAX_COLUMNS = 12  # a table gets at most this many value columns
+MAX_COLUMNS = 14  # a table gets at most this many value columns
 MAX_LEVEL = 6  # deepest Markdown heading; deeper objects get a bold title
 
 

@@ -154,3 +154,23 @@ def test_robots_catch_up_on_what_an_outage_lost(tmp_path: Path) -> None:
         with Store(tmp_path / f"{b}.sqlite", durable=False) as store:
             when = {x.seq: x.received for x in store.submaps() if x.robot == a}
         assert max(when.values()) == when[last], (a, b, when)
+
+
+def test_a_flood_from_many_senders_gets_no_sockets_beyond_the_cap(udp_echo) -> None:
+    from gmmap.fleet.links import MAX_SENDERS
+
+    senders = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(MAX_SENDERS + 8)]
+    try:
+        with DatagramRelay(udp_echo) as relay:
+            for sock in senders:
+                sock.sendto(b"x", ("127.0.0.1", relay.port))
+
+            def forward() -> tuple[int, int]:
+                count = relay.counts()["forward"]
+                return count.chunks, count.dropped
+
+            assert wait(lambda: forward() == (MAX_SENDERS, 8))
+            assert exchange(relay, [b"after"]) == []  # a new sender, still over the cap
+    finally:
+        for sock in senders:
+            sock.close()

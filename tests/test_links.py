@@ -25,6 +25,7 @@ from gmmap.fleet.links import (
     HEADER_BYTES,
     TIMESTAMP_BYTES,
     ZENOH_NO_GOSSIP,
+    DatagramRelay,
     LinkOptions,
     Relay,
     Rendezvous,
@@ -426,6 +427,54 @@ def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
         d = counts[name]
         print(f"{name}: relay {d.packets} packets {d.wire_bytes} B, interface {packets} {size}")
         assert d.bytes > 400_000
+        assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
+        assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)
+
+
+NETNS_UDP_CLIENT = """
+import socket, sys, time
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sock.connect((sys.argv[1], int(sys.argv[2])))
+sock.settimeout(5)
+for k in range(300):  # small datagrams and ones over Ethernet's MTU, each echoed before the next
+    sock.send(bytes([k % 256]) * (40 + (k * 997) % 3000))
+    sock.recv(65536)
+time.sleep(0.3)
+"""
+NETNS_UDP_ECHO = """
+import socket, sys
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sock.bind((sys.argv[1], int(sys.argv[2])))
+print("ready", flush=True)
+while True:
+    data, addr = sock.recvfrom(65536)
+    sock.sendto(data, addr)
+"""
+
+
+def test_datagram_accounting_matches_an_interface_counter(namespaces) -> None:
+    """The same over UDP (`DatagramRelay`): the datagrams, their IP fragments and headers the
+    relay counts are what the veth pair on each side carried, within 5 %."""
+    (ns_a, here_a, _, dev_a), (ns_b, _, there_b, dev_b) = namespaces
+    port = free_port()
+    echo = [sys.executable, "-c", NETNS_UDP_ECHO, there_b, str(port)]
+    server = subprocess.Popen(["ip", "netns", "exec", ns_b, *echo], stdout=subprocess.PIPE)
+    try:
+        assert server.stdout.readline().strip() == b"ready"
+        with DatagramRelay((there_b, port), host=here_a) as relay:
+            before = _rx(dev_a), _rx(dev_b)
+            _run(sys.executable, "-c", NETNS_UDP_CLIENT, here_a, str(relay.port), ns=ns_a)
+            time.sleep(0.3)
+            after = _rx(dev_a), _rx(dev_b)
+            counts = relay.counts()
+    finally:
+        server.kill()
+        server.wait()
+    for name, was, now in zip(("forward", "backward"), before, after, strict=True):
+        packets, size = now[0] - was[0], now[1] - was[1]
+        d = counts[name]
+        print(f"{name}: relay {d.packets} packets {d.wire_bytes} B, interface {packets} {size}")
+        assert d.chunks == 300 and d.packets > d.chunks  # the large ones went as fragments
         assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
         assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)
 

@@ -62,6 +62,7 @@ GATE_POLL_S = 0.1  # how often a closed rendezvous link looks again
 UDP_HEADER_BYTES = 8
 IP_PAYLOAD = 1480  # an IPv4 packet's payload on Ethernet: larger datagrams go as fragments
 QUEUE_S = 1.0  # a capped datagram link drops what would wait longer than this to be sent
+MAX_SENDERS = 64  # addresses a datagram relay forwards for: a flood of others is dropped
 
 
 @dataclass
@@ -329,9 +330,10 @@ class DatagramRelay(Relay):
     outage or while the gate is closed what would cross is dropped (and not counted: a link
     out of reach carries nothing). Under a cap a datagram waits its turn; one that would wait
     more than `QUEUE_S` is dropped, as a radio's full queue drops. Each client address gets
-    its own socket towards the target, so the target tells its peers apart. Counted per
-    datagram: its payload, UDP's 8 bytes and, per IPv4 packet (a datagram over Ethernet's
-    1,480 bytes of IP payload travels as fragments), IPv4's and Ethernet's headers.
+    its own socket towards the target, so the target tells its peers apart (up to
+    `MAX_SENDERS` of them; datagrams from more are dropped, not given sockets without end).
+    Counted per datagram: its payload, UDP's 8 bytes and, per IPv4 packet (a datagram over
+    Ethernet's 1,480 bytes of IP payload travels as fragments), IPv4's and Ethernet's headers.
     """
 
     @property
@@ -359,6 +361,9 @@ class DatagramRelay(Relay):
     def _from_client(self) -> None:
         for data, addr in _drain(self._listen):
             up = self._upstream.get(addr)
+            if up is None and len(self._upstream) >= MAX_SENDERS:
+                self._drop(self._dirs["forward"])
+                continue
             if up is None:
                 up = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                 up.connect(self.target)
