@@ -403,34 +403,6 @@ def _remove(made: list[tuple[str, str]]) -> None:
         subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=10)
 
 
-def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
-    """A client in one namespace talks through the relay (here) to an echo server in
-    another: what the relay reports for each direction, packets and bytes with headers, is
-    what the veth pair on that side carried, within 5 %."""
-    (ns_a, here_a, _, dev_a), (ns_b, _, there_b, dev_b) = namespaces
-    port = free_port()
-    echo = [sys.executable, "-c", NETNS_ECHO, there_b, str(port)]
-    server = subprocess.Popen(["ip", "netns", "exec", ns_b, *echo], stdout=subprocess.PIPE)
-    try:
-        assert server.stdout.readline().strip() == b"ready"
-        with Relay((there_b, port), host=here_a) as relay:
-            before = _rx(dev_a), _rx(dev_b)
-            _run(sys.executable, "-c", NETNS_CLIENT, here_a, str(relay.port), ns=ns_a)
-            time.sleep(0.3)
-            after = _rx(dev_a), _rx(dev_b)
-            counts = relay.counts()
-    finally:
-        server.kill()
-        server.wait()
-    for name, was, now in zip(("forward", "backward"), before, after, strict=True):
-        packets, size = now[0] - was[0], now[1] - was[1]
-        d = counts[name]
-        print(f"{name}: relay {d.packets} packets {d.wire_bytes} B, interface {packets} {size}")
-        assert d.bytes > 400_000
-        assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
-        assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)
-
-
 NETNS_UDP_CLIENT = """
 import socket, sys, time
 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -452,31 +424,47 @@ while True:
 """
 
 
-def test_datagram_accounting_matches_an_interface_counter(namespaces) -> None:
-    """The same over UDP (`DatagramRelay`): the datagrams, their IP fragments and headers the
-    relay counts are what the veth pair on each side carried, within 5 %."""
+def _through_relay(namespaces, relay_class, echo_script: str, client_script: str) -> tuple:
+    """A client in one namespace talks through a relay (here) to an echo server in another:
+    per direction, the relay's counts and what the veth pair on that side carried (packets,
+    bytes)."""
     (ns_a, here_a, _, dev_a), (ns_b, _, there_b, dev_b) = namespaces
     port = free_port()
-    echo = [sys.executable, "-c", NETNS_UDP_ECHO, there_b, str(port)]
+    echo = [sys.executable, "-c", echo_script, there_b, str(port)]
     server = subprocess.Popen(["ip", "netns", "exec", ns_b, *echo], stdout=subprocess.PIPE)
     try:
         assert server.stdout.readline().strip() == b"ready"
-        with DatagramRelay((there_b, port), host=here_a) as relay:
+        with relay_class((there_b, port), host=here_a) as relay:
             before = _rx(dev_a), _rx(dev_b)
-            _run(sys.executable, "-c", NETNS_UDP_CLIENT, here_a, str(relay.port), ns=ns_a)
+            _run(sys.executable, "-c", client_script, here_a, str(relay.port), ns=ns_a)
             time.sleep(0.3)
             after = _rx(dev_a), _rx(dev_b)
             counts = relay.counts()
     finally:
         server.kill()
         server.wait()
+    out = []
     for name, was, now in zip(("forward", "backward"), before, after, strict=True):
         packets, size = now[0] - was[0], now[1] - was[1]
         d = counts[name]
         print(f"{name}: relay {d.packets} packets {d.wire_bytes} B, interface {packets} {size}")
-        assert d.chunks == 300 and d.packets > d.chunks  # the large ones went as fragments
         assert abs(d.packets - packets) <= 0.05 * packets, (name, d, packets)
         assert abs(d.wire_bytes - size) <= 0.05 * size, (name, d, size)
+        out.append(d)
+    return tuple(out)
+
+
+def test_wire_accounting_matches_an_interface_counter(namespaces) -> None:
+    """What the relay reports for each direction, packets and bytes with headers, is what the
+    veth pair on that side carried, within 5 %."""
+    for d in _through_relay(namespaces, Relay, NETNS_ECHO, NETNS_CLIENT):
+        assert d.bytes > 400_000
+
+
+def test_datagram_accounting_matches_an_interface_counter(namespaces) -> None:
+    """The same over UDP (`DatagramRelay`): datagrams, their IP fragments and headers."""
+    for d in _through_relay(namespaces, DatagramRelay, NETNS_UDP_ECHO, NETNS_UDP_CLIENT):
+        assert d.chunks == 300 and d.packets > d.chunks  # the large ones went as fragments
 
 
 def test_robots_as_clients_of_one_router(tmp_path) -> None:
