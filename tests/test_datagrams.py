@@ -1,5 +1,5 @@
 """Zenoh over UDP (`TransportOptions.protocol`) and its emulated link
-(`gmmap.fleet.links.DatagramRelay`): counts, cap, loss and outages, and robots that catch up
+(`gmmap.fleet.datagrams.DatagramRelay`): counts, cap, loss and outages, and robots that catch up
 after a link lost what they sent."""
 
 import json
@@ -13,7 +13,8 @@ from test_links import _demo
 
 from conftest import wait
 from gmmap.errors import TransportConfigError
-from gmmap.fleet.links import DatagramRelay, LinkOptions, datagram_wire, relayed_pair
+from gmmap.fleet.datagrams import MAX_SENDERS, DatagramRelay, datagram_wire
+from gmmap.fleet.links import LinkOptions, relayed_pair
 from gmmap.fleet.session import open_session
 from gmmap.fleet.store import Store
 from gmmap.options import TransportOptions
@@ -157,8 +158,6 @@ def test_robots_catch_up_on_what_an_outage_lost(tmp_path: Path) -> None:
 
 
 def test_a_flood_from_many_senders_gets_no_sockets_beyond_the_cap(udp_echo) -> None:
-    from gmmap.fleet.links import MAX_SENDERS
-
     senders = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(MAX_SENDERS + 8)]
     try:
         with DatagramRelay(udp_echo) as relay:

@@ -20,12 +20,12 @@ from gmmap.cli.demo import rendezvous
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.fleetplots import completeness
+from gmmap.fleet.datagrams import DatagramRelay
 from gmmap.fleet.keys import free_port
 from gmmap.fleet.links import (
     HEADER_BYTES,
     TIMESTAMP_BYTES,
     ZENOH_NO_GOSSIP,
-    DatagramRelay,
     LinkOptions,
     Relay,
     Rendezvous,

@@ -38,13 +38,12 @@ from gmmap.cli.common import (
 )
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
+from gmmap.eval.emulation import paced, protocol_of, rendezvous, start_relays
 from gmmap.eval.fleetrun import summarise
 from gmmap.fleet.access import secured
 from gmmap.fleet_options import TOPOLOGIES
 from gmmap.options import drift_overrides
 
-RENDEZVOUS_PACE = 2.0  # the robots' pace on rendezvous links: twice as fast as they drive
-STARTUP_S = 3.0  # from launching the robot processes to their first frame, on rendezvous links
 # A contact that carries a submap to a robot that met no one for longer than the lease: a
 # session opens (Zenoh retries its connection every second at first), its advert follows
 # holdings.SETTLE_S later, and a fetch crosses.
@@ -95,9 +94,9 @@ def run_demo(
         from gmmap.fleet.session import open_router
 
         ports.append(listen_port())
-        router = open_router(ports[-1], protocol=_protocol(config))
+        router = open_router(ports[-1], protocol=protocol_of(config))
     reach = rendezvous(config, max_frames)
-    relays = _start_relays(config, ports, reach)
+    relays = start_relays(config, ports, reach)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
         own = _robot_config(config, i, names, ports, fleet, out, relays, reach)
@@ -160,42 +159,6 @@ def run_demo(
     return report
 
 
-def paced(config: Config, secure: bool = False) -> Config:
-    """With rendezvous links the robots move in step (`SimOptions.pace`, `RENDEZVOUS_PACE`
-    unless set), from a common start a moment from now, once the processes are up, send
-    each submap at once (`RobotOptions.bundle` 1 unless set): a contact may last a second,
-    and talk over UDP (`TransportOptions.protocol`, unless set or ``secure``: TLS needs TCP):
-    a link that comes and goes costs no handshakes, ACKs or retransmissions."""
-    sim = config.sim
-    if not config.link.rendezvous:
-        return config
-    pace = sim.pace or RENDEZVOUS_PACE
-    robot = replace(config.robot, bundle=config.robot.bundle or 1)
-    protocol = config.transport.protocol or ("tcp" if secure else "udp")
-    transport = replace(config.transport, protocol=protocol)
-    sim = replace(sim, pace=pace, start=time.time() + STARTUP_S)
-    return replace(config, sim=sim, robot=robot, transport=transport)
-
-
-def _protocol(config: Config) -> str:
-    return config.transport.protocol or "tcp"
-
-
-def rendezvous(config: Config, max_frames: int | None = None):
-    """With rendezvous links, who is in reach of whom (`gmmap.fleet.links.Rendezvous`), from
-    the simulated robots' true positions on the paced robots' clock; else None."""
-    from gmmap.fleet.links import Rendezvous
-    from gmmap.io.sim import simulate_options
-
-    link, sim = config.link, config.sim
-    if not link.rendezvous:
-        return None
-    run = simulate_options(sim, max_frames)
-    sight = run[0].world.in_sight if link.line_of_sight else None
-    tracks = [r.gt_poses[:, :3, 3] for r in run]
-    return Rendezvous(tracks, link.range_m, sight, sim.start, sim.rate * sim.pace)
-
-
 def _credentials(config: Config, folder: Path, fleet: str, names: list[str]) -> dict:
     """A new fleet authority in ``folder`` (an earlier run's is replaced) and each robot's
     member folder."""
@@ -238,24 +201,6 @@ def station_command(
     return cmd + ([] if credentials is None else ["--credentials", str(credentials)])
 
 
-def _start_relays(config: Config, ports: list[int], reach=None) -> dict:
-    """With emulated links, one relay per linked pair (i < j, `LinkOptions.pairs`) in front
-    of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it,
-    and with rendezvous links (``reach``) only while they are in reach of each other."""
-    from gmmap.fleet.links import relay_for
-
-    if not config.link.shaped:
-        return {}
-    pairs = config.link.pairs(config.sim.robots)
-    relay = relay_for(_protocol(config))
-    return {
-        (i, j): relay(
-            ("127.0.0.1", ports[j]), config.link, gate=reach.gate(i, j) if reach else None
-        ).start()
-        for i, j in pairs
-    }
-
-
 def _robot_config(
     config: Config,
     i: int,
@@ -293,7 +238,7 @@ def _robot_config(
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
-        peers = tuple(f"{_protocol(config)}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+        peers = tuple(f"{protocol_of(config)}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
     transport = replace(
         config.transport, mode=mode, listen=listen, port=ports[i], connect=peers,
         zenoh_options=zenoh,
