@@ -61,6 +61,11 @@ class TransportOptions:
         if not isinstance(self.zenoh_options, Mapping):
             raise TransportConfigError("zenoh_options must be a mapping of key to value")
 
+    @property
+    def link_protocol(self) -> str:
+        """The protocol of an unsecured robot's links: ``protocol``, TCP where unset."""
+        return self.protocol or "tcp"
+
 
 def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:
     if isinstance(endpoints, str):

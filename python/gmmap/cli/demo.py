@@ -38,7 +38,7 @@ from gmmap.cli.common import (
 )
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
-from gmmap.eval.emulation import paced, protocol_of, rendezvous, start_relays
+from gmmap.eval.emulation import paced, rendezvous, start_relays
 from gmmap.eval.fleetrun import summarise
 from gmmap.fleet.access import secured
 from gmmap.fleet_options import TOPOLOGIES
@@ -94,7 +94,7 @@ def run_demo(
         from gmmap.fleet.session import open_router
 
         ports.append(listen_port())
-        router = open_router(ports[-1], protocol=protocol_of(config))
+        router = open_router(ports[-1], protocol=config.transport.link_protocol)
     reach = rendezvous(config, max_frames)
     relays = start_relays(config, ports, reach)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
@@ -238,7 +238,8 @@ def _robot_config(
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
-        peers = tuple(f"{protocol_of(config)}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+        protocol = config.transport.link_protocol
+        peers = tuple(f"{protocol}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
     transport = replace(
         config.transport, mode=mode, listen=listen, port=ports[i], connect=peers,
         zenoh_options=zenoh,

@@ -102,7 +102,7 @@ def command(
     from gmmap.fleet.runner import run_robot
 
     if config.security.credentials is None:
-        plain = (config.transport.protocol or "tcp").upper()
+        plain = config.transport.link_protocol.upper()
         why = "no --credentials: a trusted lab"
         log(f"{config.robot.name}: plain {plain}, submaps unsigned ({why})")
     if sum((data is not None, simulated, ros2, ros1)) != 1:

@@ -56,7 +56,7 @@ def command(
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     node.start()
-    plain = f"plain {(config.transport.protocol or 'tcp').upper()}"
+    plain = f"plain {config.transport.link_protocol.upper()}"
     secured = "secured" if config.security.credentials else plain
     log(f"{o.name}: watching fleet {config.robot.fleet} ({secured}); view at {view.url or '-'}"
         f" (data: {view.data_url})")  # fmt: skip

@@ -29,11 +29,6 @@ def paced(config: Config, secure: bool = False) -> Config:
     return replace(config, sim=sim, robot=robot, transport=transport)
 
 
-def protocol_of(config: Config) -> str:
-    """The Zenoh link protocol of the tree's robots (TCP unless set)."""
-    return config.transport.protocol or "tcp"
-
-
 def rendezvous(config: Config, max_frames: int | None = None):
     """With rendezvous links, who is in reach of whom (`gmmap.fleet.links.Rendezvous`), from
     the simulated robots' true positions on the paced robots' clock; else None."""
@@ -58,7 +53,7 @@ def start_relays(config: Config, ports: list[int], reach=None) -> dict:
     if not config.link.shaped:
         return {}
     pairs = config.link.pairs(config.sim.robots)
-    relay = relay_for(protocol_of(config))
+    relay = relay_for(config.transport.link_protocol)
     return {
         (i, j): relay(
             ("127.0.0.1", ports[j]), config.link, gate=reach.gate(i, j) if reach else None

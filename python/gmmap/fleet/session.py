@@ -81,7 +81,7 @@ def open_session(
         raise TransportConfigError(
             "a secured robot's links are TLS over TCP: transport.protocol udp cannot carry them"
         )
-    protocol = "tls" if credentials is not None else options.protocol or "tcp"
+    protocol = "tls" if credentials is not None else options.link_protocol
     for attempt in range(attempts):
         listen_endpoints = (
             options.listen
