@@ -7,7 +7,8 @@ from click.testing import CliRunner
 from gmmap import Gmm, InvalidInputError, fit_gmm
 from gmmap.cli import main
 from gmmap.io.datasets import Frame
-from gmmap.io.sim import DepthCamera, get_world, simulate
+from gmmap.io.sim import DepthCamera, Lidar, get_world, simulate
+from gmmap.io.sim.robots import Motion
 from gmmap.mapping.submap import (
     BuildOptions,
     Submap,
@@ -190,3 +191,38 @@ def test_build_command_json(tmp_path):
     }
     assert len(out["submaps"]) >= 1 and all(keys <= set(s) for s in out["submaps"])
     assert len(read_submaps(tmp_path)) == len(out["submaps"])
+
+
+def test_submaps_by_space_close_at_the_same_places_at_any_rate():
+    """The same route sampled at 2, 10 and 30 Hz: submaps close where the robot has driven 1.9 m
+    or turned 100°, so they begin at the same stamps to within two 2 Hz frames (the one that
+    crosses the limit, the one that begins the next submap) and their count differs by at most
+    the last, partial one."""
+    lidar = Lidar(beams=4, azimuth_steps=128)
+    opts = BuildOptions(
+        frames_per_submap=1000,
+        submap_distance=1.9,
+        submap_angle=100.0,
+        n_components=6,
+        max_iter=5,
+        refine_iter=0,
+    )
+    starts = {}
+    for rate in (2.0, 10.0, 30.0):
+        robot = simulate(get_world("corner"), 1, sensor=lidar, motion=Motion(rate=rate))[0]
+        starts[rate] = np.array([s.stamps[0] for s in build_submaps(robot, "r", opts)])
+    assert len(starts[2.0]) >= 8  # a 360° spin, 12.8 m of driving and a 90° turn
+    for rate in (10.0, 30.0):
+        # The last, partial submap may end on either side of the route's last frame.
+        n = len(starts[2.0])
+        assert abs(len(starts[rate]) - n) <= 1
+        assert np.abs(starts[rate][:n] - starts[2.0][: len(starts[rate])]).max() <= 1.0 + 1e-9
+
+
+def test_the_frame_count_caps_a_submap_by_space(sim_frames):
+    opts = BuildOptions(
+        frames_per_submap=3, submap_distance=100.0, n_components=10, min_novelty=0.0
+    )
+    assert [s.stats["frames"] for s in build_submaps(sim_frames, "r", opts)] == [3, 3, 3, 3]
+    with pytest.raises(InvalidInputError):
+        BuildOptions(submap_distance=0.0)

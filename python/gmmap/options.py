@@ -55,9 +55,17 @@ class BuildOptions:
     benchmarks use; its Table I used 5 (``gmmap eval registration`` keeps 5). Full covariances:
     registration across robots is more accurate with them (fr1_xyz halves, fast rotation) and
     the refit after selection produces full ones anyway.
+
+    Submaps by space: with ``submap_distance`` (metres of odometry path) or ``submap_angle``
+    (degrees turned), a submap closes at the frame whose pose reaches either, and
+    ``frames_per_submap`` only caps its accepted frames. Both count every frame's motion,
+    skipped frames included, so the same path sampled at 2, 10 or 30 Hz closes its submaps at
+    the same places (to one frame). Null: submaps by frame count alone.
     """
 
     frames_per_submap: int = 20
+    submap_distance: float | None = None
+    submap_angle: float | None = None
     voxel_size: float = 0.05
     strategy: str = "points"
     n_components: int = 100
@@ -78,6 +86,10 @@ class BuildOptions:
             raise InvalidInputError(f"covariance must be one of {COVARIANCES}")
         if self.frames_per_submap < 1 or self.n_components < 1:
             raise InvalidInputError("frames_per_submap and n_components must be >= 1")
+        for name in ("submap_distance", "submap_angle"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InvalidInputError(f"{name} must be > 0 or null, got {value}")
         if not 0.0 <= self.holdout < 1.0 or not 0.0 <= self.min_novelty <= 1.0:
             raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
         if not self.voxel_size > 0:

@@ -10,13 +10,13 @@ import click
 
 from gmmap.cli.common import (
     COVARIANCE,
-    FRAMES_PER_SUBMAP,
     as_json_option,
     config_option,
     frame_options,
     open_data,
     ros_settings,
     setting,
+    submap_size,
 )
 from gmmap.config import Config
 
@@ -30,7 +30,7 @@ from gmmap.config import Config
     help="Output folder: one file per submap, index.json and config.yaml.",
 )
 @click.option("--robot", default="robot", show_default=True, help="The robot's name.")
-@FRAMES_PER_SUBMAP
+@submap_size
 @setting("--strategy", "build.strategy", "How a submap is fitted.",
          type=click.Choice(["points", "gmm-merge", "per-frame"]))  # fmt: skip
 @setting("--components", "build.n_components", "Components fitted.", type=int)

@@ -167,9 +167,35 @@ SIM_SETTINGS = (
 
 
 # Settings several commands share.
-FRAMES_PER_SUBMAP = setting(
-    "--frames-per-submap", "build.frames_per_submap", "Frames per submap.", type=int
+SUBMAP_SIZE = (
+    setting(
+        "--frames-per-submap",
+        "build.frames_per_submap",
+        "Frames per submap (with a distance or an angle: the most).",
+        type=int,
+    ),
+    setting(
+        "--submap-distance",
+        "build.submap_distance",
+        "Close a submap after this much odometry path (m).",
+        type=float,
+    ),
+    setting(
+        "--submap-angle",
+        "build.submap_angle",
+        "Close a submap after turning this much (degrees).",
+        type=float,
+    ),
 )
+
+
+def submap_size(fn: Callable) -> Callable:
+    """The flags that say when a submap closes: by frame count, by space or both."""
+    for option in reversed(SUBMAP_SIZE):
+        fn = option(fn)
+    return fn
+
+
 COVARIANCE = setting(
     "--covariance", "build.covariance", "Covariance type.", type=click.Choice(["diag", "full"])
 )

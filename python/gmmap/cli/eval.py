@@ -10,7 +10,6 @@ import click
 from gmmap.cli.common import (
     COVARIANCE,
     DESCRIPTOR,
-    FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
     MIN_MATCHES,
     as_json_option,
@@ -19,6 +18,7 @@ from gmmap.cli.common import (
     odometry_drift_option,
     setting,
     sim_settings,
+    submap_size,
 )
 from gmmap.config import Config
 
@@ -174,7 +174,7 @@ def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> s
     help="A recording split into two robots (first and second half); default: the simulator.",
 )
 @sim_settings
-@FRAMES_PER_SUBMAP
+@submap_size
 @COVARIANCE
 @setting("--top-k", "place.top_k", "Candidates verified per query.", type=int)
 @DESCRIPTOR
@@ -275,7 +275,7 @@ def eval_planner(
 
 @command.command("merge")
 @click.argument("sessions", nargs=-1, required=True)
-@FRAMES_PER_SUBMAP
+@submap_size
 @COVARIANCE
 @MIN_CONFIDENCE
 @MIN_MATCHES

@@ -12,7 +12,6 @@ from gmmap.cli.common import (
     BUDGET,
     BUNDLE,
     COVARIANCE,
-    FRAMES_PER_SUBMAP,
     MIN_CONFIDENCE,
     MIN_MATCHES,
     PROTOCOL,
@@ -25,6 +24,7 @@ from gmmap.cli.common import (
     save_trajectories,
     setting,
     sim_settings,
+    submap_size,
 )
 from gmmap.config import Config
 
@@ -52,7 +52,7 @@ from gmmap.config import Config
     "security.credentials",
     "This robot's folder from gmmap fleet add: TLS, access control, signed submaps.",
 )
-@FRAMES_PER_SUBMAP
+@submap_size
 @setting("--components", "build.n_components", "Components fitted.", type=int)
 @COVARIANCE
 @odometry_drift_option

@@ -3,8 +3,10 @@
 A `SubmapBuilder` (the paper's PtBuffer) moves each frame by its odometry pose into the
 submap's anchor frame (the first frame's pose, turned upright when the map frame's ``up`` is
 known) and adds it to a voxel buffer (exact centroids, 5 cm by default). A frame that would add
-too few new voxels (``min_novelty``) is skipped. After F accepted frames the submap is fitted
-and its components selected. Strategies:
+too few new voxels (``min_novelty``) is skipped. The submap is fitted and its components
+selected after F accepted frames or, by space, at the frame whose odometry has travelled
+``submap_distance`` m or turned ``submap_angle``° since the submap began (`BuildOptions`).
+Strategies:
 
 - ``points`` (the paper's Point-to-GMM, default): one GMM fitted to the buffered points.
 - ``gmm-merge`` (the earlier baseline): one GMM per frame with K / F components, the frames'
@@ -21,6 +23,7 @@ oblique surfaces that axis-aligned ones cannot.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -126,6 +129,7 @@ class SubmapBuilder:
         self.seq = 0
         self.frames_seen = 0
         self.frames_skipped = 0
+        self._last_pose: np.ndarray | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -135,6 +139,8 @@ class SubmapBuilder:
         self.stamps: list[float] = []
         self.frame_gmms: list[Gmm] = []
         self.busy_s = 0.0
+        self.travelled = 0.0  # metres of odometry path since the submap began
+        self.turned = 0.0  # degrees turned since the submap began
 
     @property
     def frames_per_submap(self) -> int:
@@ -145,6 +151,7 @@ class SubmapBuilder:
         """Adds a frame; returns a finished submap when this frame completes one."""
         start = time.perf_counter()
         self.frames_seen += 1
+        self._move(frame.pose)
         if self.anchor is None:
             self.anchor = level(frame.pose, self.options.up)
             if frame.gt_pose is not None:
@@ -156,15 +163,49 @@ class SubmapBuilder:
             _, _, accepted = self.buffer.offer(points, T, novelty)
         except ValueError as exc:
             raise InvalidInputError(f"frame at {frame.stamp}: {exc}") from exc
-        if not accepted:
+        if accepted:
+            self.stamps.append(frame.stamp)
+            if self.options.strategy == "gmm-merge":
+                self.frame_gmms.append(self._fit_frame(points, T))
+        else:
             self.frames_skipped += 1
-            self.busy_s += time.perf_counter() - start
-            return None
-        self.stamps.append(frame.stamp)
-        if self.options.strategy == "gmm-merge":
-            self.frame_gmms.append(self._fit_frame(points, T))
         self.busy_s += time.perf_counter() - start
-        return self._emit() if len(self.stamps) >= self.frames_per_submap else None
+        if not (self.stamps and self._full()):
+            return None
+        carry = self._overshoot()
+        submap = self._emit()
+        self.travelled, self.turned = carry
+        return submap
+
+    def _move(self, pose: np.ndarray) -> None:
+        """Adds the motion from the previous frame to this submap's: from the frame that closed
+        the last submap on, so that no step between submaps is lost at a low rate."""
+        last, self._last_pose = self._last_pose, pose
+        if last is None:
+            return
+        step = np.linalg.inv(last) @ pose
+        self.travelled += float(np.linalg.norm(step[:3, 3]))
+        cos = (np.trace(step[:3, :3]) - 1.0) / 2.0
+        self.turned += math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+
+    def _overshoot(self) -> tuple[float, float]:
+        """The motion past the limit that closed the submap, which the next one starts with:
+        so boundaries fall every ``submap_distance`` m of path whatever the frame rate."""
+        o = self.options
+        if o.submap_distance is not None and self.travelled >= o.submap_distance:
+            return self.travelled % o.submap_distance, 0.0
+        if o.submap_angle is not None and self.turned >= o.submap_angle:
+            return 0.0, self.turned % o.submap_angle
+        return 0.0, 0.0
+
+    def _full(self) -> bool:
+        """Whether the submap closes here: by space when it is set, else by frame count."""
+        o = self.options
+        if len(self.stamps) >= self.frames_per_submap:
+            return True
+        return (o.submap_distance is not None and self.travelled >= o.submap_distance) or (
+            o.submap_angle is not None and self.turned >= o.submap_angle
+        )
 
     def flush(self) -> Submap | None:
         """The partial submap of the frames added since the last one (None if there are none)."""
