@@ -18,10 +18,12 @@ from gmmap.io.sim import (
     World,
     get_world,
     simulate,
+    simulate_options,
     write_pointfiles,
     write_run,
 )
 from gmmap.math.drift import Drift
+from gmmap.options import SimOptions
 
 SMALL_CAMERA = DepthCamera(width=160, height=120, fx=131.25, fy=131.25, cx=79.5, cy=59.5)
 SMALL_LIDAR = Lidar(beams=8, azimuth_steps=256)
@@ -271,3 +273,14 @@ def test_lidar_options_reach_the_sensor(tmp_path):
     # Three beams spread over ±15°: every point lies at one of three elevations.
     elevation = np.degrees(np.arcsin(points[:, 2] / r))
     np.testing.assert_allclose(np.unique(elevation.round(2)), [-15.0, 0.0, 15.0], atol=0.01)
+
+
+def test_a_swaying_handheld_lidar_keeps_a_level_map_frame():
+    options = SimOptions(sensor="lidar", beams=32, lidar_fov=45.0, sway=10.0, rate=2.0)
+    robot = simulate_options(options, max_frames=12)[0]
+    tilt = np.degrees(np.arccos(np.clip(robot.gt_poses[:, 2, 2], -1, 1)))
+    assert 3.0 < tilt.max() <= 10.0 * np.sqrt(2) + 1e-6  # roll and pitch together
+    np.testing.assert_allclose(robot.map_to_world[2, :3], [0, 0, 1], atol=1e-12)
+    elevation = np.degrees(np.arcsin(robot.sensor.directions()[:, 2]))
+    assert elevation.min() == pytest.approx(-45.0) and elevation.max() == pytest.approx(45.0)
+    assert len(robot.points(0)) > 1000

@@ -368,13 +368,16 @@ class PlannerOptions:
 class SimOptions:
     """The simulator (`gmmap.io.sim`): which world, how many robots, which sensor, how they move.
 
-    ``sensor``: a 16-beam 360° LiDAR, or a 60° depth camera ``width`` px wide (4:3), whose narrow
-    views alias more. ``drift``: the simulated odometry's error per metre driven (and rad per rad
-    turned; `gmmap.math.drift.Drift.per_metre`), which the robots never see. 320 px: the depth
-    demo at that width runs three robots in real time on two cores. ``pace``: None, a robot
-    maps its frames as fast as it can; a number, frame k is due ``k / (rate * pace)`` s after
-    ``start`` (Unix time; None: when the robot starts), so that robots move in step as in the
-    field, however fast each maps (rendezvous links need it).
+    ``sensor``: a 16-beam 360° LiDAR over ±``lidar_fov``° of elevation (VLP-16: ±15°; a handheld
+    360° LiDAR: 32-64 beams over ±45°; KITTI-like: ±25°), or a 60° depth camera ``width`` px
+    wide (4:3), whose narrow views alias more. ``sway``: the carrier rolls and pitches by up to
+    this many degrees as a handheld or legged robot does (0: a wheeled robot on a flat floor);
+    its odometry knows the tilt, as an IMU would. ``drift``: the simulated odometry's error per
+    metre driven (and rad per rad turned; `gmmap.math.drift.Drift.per_metre`), which the robots
+    never see. 320 px: the depth demo at that width runs three robots in real time on two cores.
+    ``pace``: None, a robot maps its frames as fast as it can; a number, frame k is due ``k /
+    (rate * pace)`` s after ``start`` (Unix time; None: when the robot starts), so that robots
+    move in step as in the field, however fast each maps (rendezvous links need it).
     """
 
     world: str = "office"  # a built-in world, random-office:<seed> or a world .json file
@@ -383,7 +386,9 @@ class SimOptions:
     sensor: str = "lidar"
     width: int = 320
     beams: int = 16
+    lidar_fov: float = 15.0  # ± degrees of elevation
     lidar_range: float = 30.0
+    sway: float = 0.0  # degrees of roll and pitch
     noise: bool = True
     rate: float = 5.0  # frames per second
     speed: float = 0.5  # m/s
@@ -400,6 +405,8 @@ class SimOptions:
             raise InvalidInputError("sim.robots >= 1, sim.width >= 8, sim.beams >= 1")
         if not (self.lidar_range > 0 and self.rate > 0 and self.speed > 0 and self.drift >= 0):
             raise InvalidInputError("sim.lidar_range, rate, speed > 0 and drift >= 0")
+        if not (0 < self.lidar_fov <= 90 and 0 <= self.sway < 45):
+            raise InvalidInputError("sim.lidar_fov in (0, 90] and sim.sway in [0, 45) degrees")
 
 
 @dataclass(frozen=True)

@@ -141,13 +141,22 @@ def simulate(
     for i in range(robots):
         body = route_poses(routes[i], motion)[:max_frames]
         gt = body @ sensor.mount()
-        map_to_world = body[0]
+        map_to_world = upright(body[0])  # a swaying carrier's map frame is still level
         true_odom = np.linalg.inv(map_to_world) @ gt
         rng = np.random.default_rng([seed, i, 1 << 20])
         odom = odometry(true_odom, rng) if odometry else true_odom
         stamps = EPOCH + np.arange(len(body)) / motion.rate
         run.append(SimRobot(f"robot_{i}", i, world, sensor, stamps, gt, odom, map_to_world, seed))
     return run
+
+
+def upright(pose: np.ndarray) -> np.ndarray:
+    """``pose`` with its roll and pitch taken out: the heading about +z and the position."""
+    out = np.eye(4)
+    yaw = np.arctan2(pose[1, 0], pose[0, 0])
+    out[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    out[:3, 3] = pose[:3, 3]
+    return out
 
 
 def write_tum(robot: SimRobot, folder: str | Path, progress: Progress | None = None) -> None:
@@ -228,5 +237,5 @@ def simulate_options(options: SimOptions, max_frames: int | None = None) -> list
     o = options
     world = World.load(o.world) if o.world.endswith(".json") else get_world(o.world)
     drift = Drift.per_metre(o.drift, o.seed, UP)
-    motion = Motion(speed=o.speed, rate=o.rate)
+    motion = Motion(speed=o.speed, rate=o.rate, sway=o.sway)
     return simulate(world, o.robots, o.seed, sim_sensor(o), motion, drift, max_frames)

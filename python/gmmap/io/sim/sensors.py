@@ -124,5 +124,11 @@ def sim_sensor(options: SimOptions) -> DepthCamera | Lidar:
     o = options
     if o.sensor == "lidar":
         noise = Lidar.noise_std if o.noise else 0.0
-        return Lidar(beams=o.beams, max_range=o.lidar_range, noise_std=noise)
+        return Lidar(
+            beams=o.beams,
+            fov_up=o.lidar_fov,
+            fov_down=-o.lidar_fov,
+            max_range=o.lidar_range,
+            noise_std=noise,
+        )
     return DepthCamera.scaled(o.width, o.width * 3 // 4, o.noise)
