@@ -8,11 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from gmmap.config import Config
 from gmmap.eval.registration import evaluate_registration, pose_errors
 from gmmap.io.datasets import BUNDLED_TUM_SLICE
 from gmmap.io.datasets.tum import TumRgbd
+from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
-from gmmap.mapping.submap import build_submaps
+from gmmap.mapping.submap import Submap, build_submaps
 from gmmap.math.em import fit_gmm
 from gmmap.math.gmm import Gmm
 from gmmap.math.register import Registration
@@ -105,3 +107,57 @@ def test_a_query_that_fits_two_places_of_one_map_is_rejected() -> None:
     # Alone with its agreeing neighbour, the first is kept.
     judged = distinct([match(0, 0.8), match(2, 0.7)], anchors, PlaceOptions())
     assert [m.accepted for m in judged] == [True, True] and judged[0].conflict == 0.0
+
+
+def room(rng) -> np.ndarray:
+    """The corridor closed at one end, with a cabinet: not the same from its other end."""
+    x, y, z = np.eye(3)
+    end = plane(rng, (0, -1, 0), y, z, 2, 2)
+    cabinet = [plane(rng, (1.0, 0.4, 0), x, z, 0.8, 1.2), plane(rng, (1.0, 0.4, 0), y, z, 0.6, 1.2)]
+    return np.vstack([corridor(rng), end, *cabinet])
+
+
+def hall(rng) -> np.ndarray:
+    """A wide hall with a low wall across it: like nothing else here."""
+    x, y, z = np.eye(3)
+    return np.vstack([
+        plane(rng, (0, -3, 0), x, y, 6, 6),
+        plane(rng, (0, -3, 0), y, z, 6, 2),
+        plane(rng, (3, -2, 0), y, z, 3, 0.8),
+        plane(rng, (0, 3, 0), x, z, 6, 2),
+    ])  # fmt: skip
+
+
+def submap(robot: str, seq: int, anchor: np.ndarray, points: np.ndarray) -> Submap:
+    local = (points - anchor[:3, 3]) @ anchor[:3, :3]
+    return Submap(robot, seq, anchor, np.array([float(seq)]), len(points), fit(local))
+
+
+def test_a_match_as_good_as_the_robots_own_lookalikes_is_refused() -> None:
+    """Robot a has seen two identical rooms 30 m apart by its odometry (a building of equal
+    offices): b's view of such a room fits a's first as well as it would fit a's second, so
+    the match proves nothing and is refused. a's hall, unlike anything else a has seen,
+    matches b's view of it and is kept."""
+    rng = np.random.default_rng(1)
+    office, other = room(rng), hall(rng)
+    away = (30.0, 0.0, 0.0), (60.0, 0.0, 0.0)
+    b_frame = pose(70, (3.0, -2.0, 0.0))  # where b's map frame sits in a's
+    held = [
+        submap("a", 0, np.eye(4), office),
+        submap("a", 1, pose(0, away[0]), office + away[0]),
+        submap("a", 2, pose(0, away[1]), other + away[1]),
+        submap("b", 0, np.linalg.inv(b_frame), room(rng)),
+        submap("b", 1, np.linalg.inv(b_frame) @ pose(0, away[1]), hall(rng) + away[1]),
+    ]
+    # Only this test decides here: no within-pair ambiguity test, no local-map refinement.
+    options = PlaceOptions(max_distance=2.0, max_ambiguity=1.0, skip_recent=0, refine_neighbours=0)
+    mapper = Mapper(Config(place=options))
+    matches = {(m.query, (m.candidate.robot, m.candidate.seq)): m for m in mapper.add(held)}
+    lookalike = matches[(("a", 0), ("b", 0))]
+    assert lookalike.registration.confidence > 0.8
+    assert not lookalike.accepted and lookalike.confusion >= options.max_confusion
+    unique = matches[(("a", 2), ("b", 1))]
+    assert unique.accepted and unique.confusion < options.max_confusion
+    truth = np.linalg.inv(held[4].anchor) @ held[2].anchor
+    t, r = pose_errors(unique.registration.transform, truth)
+    assert t < 0.05 and r < 1.0, (t, r)

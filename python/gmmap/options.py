@@ -217,15 +217,21 @@ class PlaceOptions:
     use_yaw_hint: bool = False  # the descriptor's yaw instead of the full yaw search
     refine_neighbours: int = 2
     max_refine_shift: float = 0.15
+    # Refuse a match unless both submaps' confusion (`gmmap.mapping.confusion`: the best C
+    # each reaches against its own robot's submaps that odometry puts apart, over up to
+    # confusion_probes of them) stays under max_confusion·C. 0 probes: no such test.
+    max_confusion: float = 0.85
+    confusion_probes: int = 3
 
     def __post_init__(self) -> None:
         if (
             self.top_k < 1
             or self.resample_points < 2
-            or min(self.skip_recent, self.refine_neighbours) < 0
+            or min(self.skip_recent, self.refine_neighbours, self.confusion_probes) < 0
         ):
             raise InvalidInputError(
-                "top_k >= 1, resample_points >= 2, skip_recent and refine_neighbours >= 0"
+                "top_k >= 1, resample_points >= 2, skip_recent, refine_neighbours and "
+                "confusion_probes >= 0"
             )
         far = self.max_distance
         if not 0 <= self.min_confidence <= 1 or not (far is None or 0 <= far <= 2):

@@ -29,6 +29,7 @@ import numpy as np
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
+from gmmap.mapping.confusion import confusion
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
 from gmmap.mapping.place import Candidate, Match, PlaceDatabase, descriptor_for, distinct
 from gmmap.mapping.submap import Submap
@@ -60,6 +61,7 @@ class Mapper:
         self._judged: set[frozenset[Node]] = set()
         # (query, candidate) → its registration before refinement: deterministic, so reusable.
         self._registrations: dict[tuple[Node, Node], Registration] = {}
+        self._confusions: dict[Node, float] = {}
         self._lock = threading.Lock()
 
     # ---- input ------------------------------------------------------------------------------
@@ -97,6 +99,7 @@ class Mapper:
             with self._lock:
                 anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
             judged = distinct(judged, anchors, self.config.place)
+            judged = [self._unconfused(m) if m.accepted else m for m in judged]
             matches.extend(self._refined(s, m) if m.accepted else m for m in judged)
             if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
                 accepted = sum(m.accepted for m in matches)
@@ -113,6 +116,23 @@ class Mapper:
             self._registrations[key] = m.registration
             return m
         return self.db.judge(key[0], c, reg)
+
+    def _unconfused(self, m: Match) -> Match:
+        """``m`` refused unless its confidence is clearly above what either submap reaches
+        against places its own robot knows are elsewhere (`gmmap.mapping.confusion`)."""
+        options = self.config.place
+        level = max(self._confusion(m.query), self._confusion((m.candidate.robot, m.candidate.seq)))
+        ratio = level / m.registration.confidence if m.registration.confidence > 0 else 0.0
+        return replace(m, accepted=ratio < options.max_confusion, confusion=ratio)
+
+    def _confusion(self, key: Node) -> float:
+        """The confusion of held submap ``key``, computed once, against what is held then."""
+        if key not in self._confusions:
+            with self._lock:
+                held = dict(self.submaps)
+            probes = self.config.place.confusion_probes
+            self._confusions[key] = confusion(key, held, self.db, probes)
+        return self._confusions[key]
 
     def rejudged(self, progress: Progress | None = None) -> Mapper:
         """A fresh mapper over the same submaps, judged in one call and optimised, as an offline

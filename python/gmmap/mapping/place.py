@@ -152,13 +152,15 @@ class Match:
     """A verified (or rejected) candidate: ``registration.transform`` maps the query submap's
     anchor frame into the candidate's. ``conflict``: the best confidence, relative to this
     one's, of another verified candidate of the same query in the same robot's map that puts
-    the query elsewhere (`distinct`)."""
+    the query elsewhere (`distinct`); ``confusion``: see `gmmap.mapping.confusion`."""
 
     query: tuple[str, int]
     candidate: Candidate
     registration: Registration
     accepted: bool
     conflict: float = 0.0
+    # The higher of the two submaps' `gmmap.mapping.confusion`, relative to this confidence.
+    confusion: float = 0.0
 
 
 def distinct(
@@ -217,6 +219,10 @@ class PlaceDatabase:
         if self.options.max_distance is not None:
             return self.options.max_distance
         return float(getattr(self.descriptor, "candidate_distance", SHAPE_CANDIDATE_DISTANCE))
+
+    def vector(self, key: tuple[str, int]) -> np.ndarray:
+        """The held submap ``key``'s unit descriptor."""
+        return self._vectors[self._index[key]]
 
     def describe(self, gmm: Gmm) -> np.ndarray:
         points = resample(gmm, self.options.resample_points)
