@@ -41,7 +41,7 @@ from gmmap.eval.registration import (
     run_method,
     summarise,
 )
-from gmmap.fleet.codec import DEFAULT_DISTORTION, KIND_SUBMAP
+from gmmap.fleet.wire.codec import DEFAULT_DISTORTION, KIND_SUBMAP
 from gmmap.io import datasets
 from gmmap.mapping.submap import BuildOptions, Submap
 

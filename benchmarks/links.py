@@ -152,8 +152,8 @@ def fleet_curve(curves: dict) -> tuple[list[float], list[float]]:
 def _pair(tmp: str, protocol: str = "tcp"):
     """Two robots' transports, b reaching a through a counting relay, both serving a store
     and subscribed: (relay, a, b, messages b received)."""
-    from gmmap.fleet.links import relayed_pair
-    from gmmap.fleet.store import Store
+    from gmmap.eval.links import relayed_pair
+    from gmmap.fleet.storage.store import Store
 
     got: list[int] = []
     pair = relayed_pair("idle", protocol=protocol)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.config import Config
-from gmmap.fleet.robot import RobotNode
+from gmmap.fleet.node.robot import RobotNode
 from gmmap.io.sim import simulate_options
 from gmmap.mapping.live import LiveInput
 

@@ -41,8 +41,8 @@ import numpy as np
 from live import cpu_seconds, node  # benchmarks/live.py: this script's folder is on the path
 
 from gmmap.config import Config
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.node.robot import RobotNode
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import TumRgbd
 from gmmap.io.datasets.tum import read_depth

@@ -27,10 +27,10 @@ from pathlib import Path
 
 from gmmap.cli.demo import backend_follows_drift, run_demo
 from gmmap.config import Config
-from gmmap.fleet.access import issue_fleet
-from gmmap.fleet.codec import decode, encode
-from gmmap.fleet.credentials import load
-from gmmap.fleet.seal import open_sealed, seal
+from gmmap.fleet.security.access import issue_fleet
+from gmmap.fleet.security.credentials import load
+from gmmap.fleet.security.seal import open_sealed, seal
+from gmmap.fleet.wire.codec import decode, encode
 from gmmap.io.sim import simulate_options
 from gmmap.mapping.submap import SubmapBuilder
 
@@ -66,10 +66,10 @@ def seal_costs(tmp: Path, n: int = 2000) -> dict:
 
 def link_costs(tmp: Path, secure: bool, idle_s: float) -> dict:
     """Set-up and idle bytes between two robots' transports, through a counting relay."""
-    from gmmap.fleet.keys import free_port
-    from gmmap.fleet.links import ZENOH_NO_GOSSIP, Relay
-    from gmmap.fleet.store import Store
-    from gmmap.fleet.transport import Transport, TransportConfig
+    from gmmap.eval.links import ZENOH_NO_GOSSIP, Relay
+    from gmmap.fleet.net.keys import free_port
+    from gmmap.fleet.net.transport import Transport, TransportConfig
+    from gmmap.fleet.storage.store import Store
     from gmmap.options import TransportOptions
 
     members = issue_fleet(tmp / f"link{int(secure)}", "f", ["a", "b"]) if secure else {}

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from gmmap.cli.demo import backend_follows_drift, run_demo
 from gmmap.config import Config
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
 
 
 def one(robots: int, max_frames: int | None) -> dict:

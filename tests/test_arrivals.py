@@ -1,6 +1,6 @@
-"""Where a robot's fetches start and who answers them (`gmmap.fleet.arrivals`)."""
+"""Where a robot's fetches start and who answers them (`gmmap.fleet.sharing.arrivals`)."""
 
-from gmmap.fleet.arrivals import QUIET_S, Arrivals
+from gmmap.fleet.sharing.arrivals import QUIET_S, Arrivals
 
 
 def test_a_fetch_starts_at_the_first_gap_of_what_arrived_or_was_stored() -> None:

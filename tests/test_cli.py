@@ -57,7 +57,7 @@ def test_bad_input_is_one_line_not_a_traceback(tmp_path):
 def test_a_missing_extra_is_named(monkeypatch):
     import sys
 
-    monkeypatch.delitem(sys.modules, "gmmap.fleet.transport", raising=False)
+    monkeypatch.delitem(sys.modules, "gmmap.fleet.net.transport", raising=False)
     monkeypatch.setitem(sys.modules, "zenoh", None)  # as if the fleet extra were not installed
     result = CliRunner().invoke(main, ["demo", "--robots", "1"])
     assert result.exit_code == 1

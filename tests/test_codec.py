@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 
 import gmmap
 from gmmap import DecodeError, Gmm, InvalidInputError
-from gmmap.fleet import anchor as anchors_codec
-from gmmap.fleet import codec
+from gmmap.fleet.wire import anchor as anchors_codec
+from gmmap.fleet.wire import codec
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps, level
 from gmmap.math.geometry import rotation_angle

@@ -1,4 +1,4 @@
-"""Fleet credentials (`gmmap.fleet.credentials`) and ``gmmap fleet``: issuing, loading,
+"""Fleet credentials (`gmmap.fleet.security.credentials`) and ``gmmap fleet``: issuing, loading,
 revoking, and refusing what the fleet's authority did not issue."""
 
 import json
@@ -25,8 +25,8 @@ from gmmap.errors import (
     RevokedMemberError,
     UntrustedMemberError,
 )
-from gmmap.fleet import authority, credentials
-from gmmap.fleet.credentials import (
+from gmmap.fleet.security import authority, credentials
+from gmmap.fleet.security.credentials import (
     SIGNING_KEY_OID,
     add_member,
     describe,

@@ -1,6 +1,6 @@
 """Zenoh over UDP (`TransportOptions.protocol`) and its emulated link
-(`gmmap.fleet.datagrams.DatagramRelay`): counts, cap, loss and outages, and robots that catch up
-after a link lost what they sent."""
+(`gmmap.eval.links.datagrams.DatagramRelay`): counts, cap, loss and outages, and robots that catch
+up after a link lost what they sent."""
 
 import json
 import socket
@@ -13,11 +13,11 @@ from test_links import _demo
 
 from conftest import wait
 from gmmap.errors import TransportConfigError
-from gmmap.fleet.datagrams import MAX_SENDERS, DatagramRelay, datagram_wire
-from gmmap.fleet.links import LinkOptions, relayed_pair
-from gmmap.fleet.session import open_session
-from gmmap.fleet.store import Store
-from gmmap.options import TransportOptions
+from gmmap.eval.links import relayed_pair
+from gmmap.eval.links.datagrams import MAX_SENDERS, DatagramRelay, datagram_wire
+from gmmap.fleet.net.session import open_session
+from gmmap.fleet.storage.store import Store
+from gmmap.options import LinkOptions, TransportOptions
 
 
 @pytest.fixture

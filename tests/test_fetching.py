@@ -1,11 +1,11 @@
-"""The fetch stage (`gmmap.fleet.fetching`): which quiet robots a mapping robot asks the
+"""The fetch stage (`gmmap.fleet.sharing.fetching`): which quiet robots a mapping robot asks the
 robots in between about, and how."""
 
 import threading
 from types import SimpleNamespace
 
-from gmmap.fleet.fetching import Fetching
-from gmmap.fleet.holdings import LINGER, MAPPING
+from gmmap.fleet.sharing.fetching import Fetching
+from gmmap.fleet.sharing.holdings import LINGER, MAPPING
 
 
 class Node(Fetching):
@@ -89,7 +89,7 @@ def test_a_relayed_fetch_asks_the_one_peer_we_hear_holding_the_most() -> None:
 
 
 def test_own_submaps_waiting_for_their_bundle_leave_now_not_in_the_answer() -> None:
-    from gmmap.fleet import linkstats
+    from gmmap.fleet.sharing import linkstats
 
     asked_now: list[bool] = []
     node = SimpleNamespace(

@@ -1,6 +1,6 @@
-"""Adverts of what each robot holds (`gmmap.fleet.holdings`)."""
+"""Adverts of what each robot holds (`gmmap.fleet.sharing.holdings`)."""
 
-from gmmap.fleet.holdings import (
+from gmmap.fleet.sharing.holdings import (
     FINAL,
     LINGER,
     MAPPING,
@@ -73,7 +73,7 @@ def test_lacking_names_the_peers_that_differ_present_or_gone_without_a_final_adv
 
 
 def test_news_goes_at_most_once_a_second_and_anything_every_30_s() -> None:
-    from gmmap.fleet.holdings import ADVERT_EVERY_S, SETTLE_S, advert_due
+    from gmmap.fleet.sharing.holdings import ADVERT_EVERY_S, SETTLE_S, advert_due
 
     assert not advert_due(10.0, True, told_at=10.0 - SETTLE_S / 2)
     assert advert_due(10.0, True, told_at=10.0 - SETTLE_S)

@@ -1,4 +1,4 @@
-"""The emulated link (`gmmap.fleet.links`): counts, rate cap, stalls, outages, and Zenoh
+"""The emulated link (`gmmap.eval.links`): counts, rate cap, stalls, outages, and Zenoh
 through it."""
 
 import json
@@ -20,18 +20,18 @@ from gmmap.cli.demo import rendezvous
 from gmmap.config import load_config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.fleetplots import completeness
-from gmmap.fleet.datagrams import DatagramRelay
-from gmmap.fleet.keys import free_port
-from gmmap.fleet.links import (
+from gmmap.eval.links import (
     HEADER_BYTES,
     TIMESTAMP_BYTES,
     ZENOH_NO_GOSSIP,
-    LinkOptions,
     Relay,
     Rendezvous,
     relayed_pair,
 )
-from gmmap.fleet.store import Store
+from gmmap.eval.links.datagrams import DatagramRelay
+from gmmap.fleet.net.keys import free_port
+from gmmap.fleet.storage.store import Store
+from gmmap.options import LinkOptions
 
 
 class _Echo(socketserver.BaseRequestHandler):

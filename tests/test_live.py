@@ -9,7 +9,7 @@ import pytest
 from conftest import wait
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
-from gmmap.fleet.robot import RobotNode
+from gmmap.fleet.node.robot import RobotNode
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.mapping.live import LiveInput
 from gmmap.options import BuildOptions, RobotOptions

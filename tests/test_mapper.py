@@ -6,9 +6,9 @@ import pytest
 from conftest import BUNDLED_TUM_SLICE
 from gmmap.config import Config
 from gmmap.eval.merge import merge
-from gmmap.fleet.codec import decode, encode
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.store import Store
+from gmmap.fleet.node.robot import RobotNode
+from gmmap.fleet.storage.store import Store
+from gmmap.fleet.wire.codec import decode, encode
 from gmmap.io.datasets.tum import TumRgbd
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.submap import build_submaps

@@ -1,4 +1,4 @@
-"""The outbox (`gmmap.fleet.outbox`): priority order, bundles and the byte budget."""
+"""The outbox (`gmmap.fleet.net.outbox`): priority order, bundles and the byte budget."""
 
 import threading
 import time
@@ -7,8 +7,8 @@ import pytest
 
 from conftest import wait
 from gmmap.errors import InvalidInputError, TransportError
-from gmmap.fleet.keys import data_key
-from gmmap.fleet.outbox import Budget, Outbox
+from gmmap.fleet.net.keys import data_key
+from gmmap.fleet.net.outbox import Budget, Outbox
 from gmmap.options import RobotOptions
 
 SENDER = ("fleet", "r")

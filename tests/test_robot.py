@@ -12,11 +12,11 @@ import pytest
 
 from conftest import wait
 from gmmap.config import Config, load_config
+from gmmap.eval.links import ZENOH_NO_GOSSIP
 from gmmap.eval.registration import pose_errors
-from gmmap.fleet.links import ZENOH_NO_GOSSIP
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.store import Store
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.node.robot import RobotNode
+from gmmap.fleet.storage.store import Store
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.options import BackendOptions, BuildOptions, RobotOptions, TransportOptions
 
@@ -240,7 +240,7 @@ def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
 
 
 def test_a_fetch_asks_only_for_what_an_advert_shows_and_has_not_arrived(tmp_path):
-    from gmmap.fleet import holdings
+    from gmmap.fleet.sharing import holdings
 
     b = node(tmp_path, "b", free_port())
     asked = []

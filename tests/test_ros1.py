@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import wait
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.io.datasets.tum import read_depth

@@ -12,8 +12,8 @@ import zenoh
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.node.robot import RobotNode
 from gmmap.io import ros2
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.io.ros2bridge import Ros2Bridge, tf_tree

@@ -1,12 +1,12 @@
-"""Sealed messages (`gmmap.fleet.seal`) and the door every arriving message passes
-(`gmmap.fleet.door`, `gmmap.fleet.guard`)."""
+"""Sealed messages (`gmmap.fleet.security.seal`) and the door every arriving message passes
+(`gmmap.fleet.security.door`, `gmmap.fleet.security.guard`)."""
 
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from gmmap.errors import RefusedError
-from gmmap.fleet.guard import MAX_SENDERS, OTHERS, Guard
-from gmmap.fleet.seal import OVERHEAD, open_sealed, seal
+from gmmap.fleet.security.guard import MAX_SENDERS, OTHERS, Guard
+from gmmap.fleet.security.seal import OVERHEAD, open_sealed, seal
 from gmmap.fleet_options import SecurityOptions
 
 KEYS = {name: Ed25519PrivateKey.generate() for name in ("a", "b")}

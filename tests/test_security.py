@@ -1,5 +1,5 @@
-"""A secured fleet (`gmmap.fleet.access`, `gmmap.fleet.door`): only members connect, read and
-publish, each only under its own name, and every submap is checked end to end."""
+"""A secured fleet (`gmmap.fleet.security.access`, `gmmap.fleet.security.door`): only members
+connect, read and publish, each only under its own name, and every submap is checked end to end."""
 
 import json
 import os
@@ -11,15 +11,15 @@ import zenoh
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.access import issue_fleet
-from gmmap.fleet.codec import encode
-from gmmap.fleet.credentials import add_member, load, revoke
-from gmmap.fleet.door import CRL_EVERY_S
-from gmmap.fleet.keys import data_key
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.seal import seal
-from gmmap.fleet.session import zenoh_config
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.keys import data_key
+from gmmap.fleet.net.session import zenoh_config
+from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.node.robot import RobotNode
+from gmmap.fleet.security.access import issue_fleet
+from gmmap.fleet.security.credentials import add_member, load, revoke
+from gmmap.fleet.security.door import CRL_EVERY_S
+from gmmap.fleet.security.seal import seal
+from gmmap.fleet.wire.codec import encode
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.mapping.submap import SubmapBuilder
 from gmmap.options import (

@@ -1,4 +1,4 @@
-"""The base station (`gmmap.fleet.station`, `gmmap.io.liveview`, ``gmmap station``): it joins
+"""The base station (`gmmap.fleet.node.station`, `gmmap.io.liveview`, ``gmmap station``): it joins
 late and still holds every submap, sends nothing, holds no write permission in a secured
 fleet, and a real headless browser (Debian's Chromium) shows its map."""
 
@@ -18,11 +18,11 @@ import pytest
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.access import issue_fleet
-from gmmap.fleet.credentials import add_member
-from gmmap.fleet.robot import RobotNode
-from gmmap.fleet.station import StationNode
-from gmmap.fleet.transport import free_port
+from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.node.robot import RobotNode
+from gmmap.fleet.node.station import StationNode
+from gmmap.fleet.security.access import issue_fleet
+from gmmap.fleet.security.credentials import add_member
 from gmmap.io import viz
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.options import (
@@ -180,7 +180,7 @@ def test_the_browser_shows_the_merged_map(fleet, tmp_path):
 
 
 def test_byte_counts_that_are_not_such_a_message_are_dropped():
-    from gmmap.fleet import linkstats
+    from gmmap.fleet.sharing import linkstats
 
     good = linkstats.encode({"sent": {"a": {"submap": {"payload_bytes": 5}}}}, "a")
     assert linkstats.decode(good) == {"robot": "a", "sent": {"a": 5}, "received": {}}
@@ -238,7 +238,7 @@ def test_a_view_port_in_use_is_a_clear_error():
 
 
 def test_a_station_refuses_a_robots_credentials(tmp_path):
-    from gmmap.fleet.credentials import CredentialsError
+    from gmmap.fleet.security.credentials import CredentialsError
 
     members = issue_fleet(tmp_path / "fleet", "f", ["a"])
     with pytest.raises(CredentialsError, match="role station"):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gmmap.errors import FileFormatError, GmmapError, InvalidInputError
-from gmmap.fleet.store import SCHEMA_VERSION, Edge, Store, StoreError, StoreFormatError
+from gmmap.fleet.storage.store import SCHEMA_VERSION, Edge, Store, StoreError, StoreFormatError
 
 
 def _edge(target_seq=0, source_seq=1, status="accepted", confidence=0.8, shift=1.0) -> Edge:
@@ -180,7 +180,7 @@ def test_two_connections_one_file(tmp_path: Path):
 
 _CRASH = """
 import os, sys
-from gmmap.fleet.store import Store
+from gmmap.fleet.storage.store import Store
 store = Store(sys.argv[1])
 store.put_submap("a", 0, b"committed")
 with store._transaction() as conn:

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from gmmap.fleet.keys import (
+from gmmap.fleet.net.keys import (
     FetchRequest,
     fetch_key,
     parse_fetch,
@@ -15,8 +15,7 @@ from gmmap.fleet.keys import (
     parse_seq_ranges,
     seq_ranges,
 )
-from gmmap.fleet.store import Store
-from gmmap.fleet.transport import (
+from gmmap.fleet.net.transport import (
     Transport,
     TransportConfig,
     TransportConfigError,
@@ -27,6 +26,7 @@ from gmmap.fleet.transport import (
     free_port,
     parse_data_key,
 )
+from gmmap.fleet.storage.store import Store
 
 WAIT = 10.0  # generous: polling returns as soon as the condition holds
 
@@ -381,7 +381,7 @@ def test_a_fetch_with_a_malformed_held_list_is_ignored(pair):
 def test_fetch_answers_keep_to_the_budget(tmp_path: Path):
     """Five 1,000 B answers at 2,000 B/s, one second of burst: the last leaves 1.5 s or more
     after the first."""
-    from gmmap.fleet.outbox import Budget
+    from gmmap.fleet.net.outbox import Budget
 
     port_a = free_port()
     with (

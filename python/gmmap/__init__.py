@@ -10,7 +10,7 @@ from gmmap.errors import (
     InvalidGmmError,
     InvalidInputError,
 )
-from gmmap.fleet.codec import decode, encode
+from gmmap.fleet.wire.codec import decode, encode
 from gmmap.math.em import fit_gmm
 from gmmap.math.gmm import FitInfo, Gmm
 from gmmap.math.points import voxel_filter

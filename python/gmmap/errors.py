@@ -51,8 +51,9 @@ class RefusedError(GmmapError, ValueError):
 
 
 class CredentialsError(GmmapError, ValueError):
-    """Fleet credentials that cannot be made or used (`gmmap.fleet.credentials`): a bad fleet,
-    member or role name, a fleet or member that already exists, a member that is not there."""
+    """Fleet credentials that cannot be made or used (`gmmap.fleet.security.credentials`): a bad
+    fleet, member or role name, a fleet or member that already exists, a member that is not
+    there."""
 
 
 class CredentialsFileError(CredentialsError, FileFormatError):

@@ -19,7 +19,7 @@ PROTOCOLS = ("tcp", "udp")
 
 @dataclass(frozen=True)
 class TransportOptions:
-    """Where a robot's Zenoh session listens and whom it connects to (`gmmap.fleet.transport`).
+    """Where a robot's Zenoh session listens and whom it connects to (`gmmap.fleet.net.transport`).
 
     ``listen`` None means one loopback endpoint ``<protocol>/127.0.0.1:<port>``; ``port`` 0 picks
     a free ephemeral port when the transport opens. ``protocol``: ``tcp`` (None: TCP, or TLS in a
@@ -78,16 +78,16 @@ DEFAULT_BUNDLE = 3  # own submaps sent together (`RobotOptions.bundle`)
 
 @dataclass(frozen=True)
 class RobotOptions:
-    """One robot node (`gmmap.fleet.robot`). ``store`` None: a temporary store (lost on exit).
+    """One robot node (`gmmap.fleet.node.robot`). ``store`` None: a temporary store (lost on exit).
     ``wait_for``: peers to wait for (up to ``wait_timeout`` s) before consuming frames;
     ``linger``: seconds it keeps receiving, matching and optimising after its frames end;
     then it stays until the peers in reach hold what it holds and it holds what they hold, and
     every robot it knows of is done mapping and its last submap has arrived, or until
-    ``deadline`` seconds after its frames (`gmmap.fleet.robot.RobotNode.linger`).
+    ``deadline`` seconds after its frames (`gmmap.fleet.node.robot.RobotNode.linger`).
     ``rejudge``: at the end, every pair held is judged again in one call, so that the final
     maps are an offline merge's of the same submaps, whatever order they arrived in.
     ``budget``: bytes/s of payload and keys the robot puts on each link, submaps, adverts and
-    fetch answers together, sent in priority order (`gmmap.fleet.outbox`); None: no cap.
+    fetch answers together, sent in priority order (`gmmap.fleet.net.outbox`); None: no cap.
     ``bundle``: own submaps sent together, in one Zenoh batch that shares its packets' headers
     and ACKs; a submap waits at most ``bundle_wait`` s for the others, and none waits once the
     frames end or an advert is due (1: each at once). None: ``DEFAULT_BUNDLE``, or 1 where
@@ -127,7 +127,7 @@ class RobotOptions:
 
 @dataclass(frozen=True)
 class LinkOptions:
-    """Emulated links between the demo's robots (`gmmap.fleet.links`).
+    """Emulated links between the demo's robots (`gmmap.eval.links`).
 
     With ``emulate`` (or any shaping set) each pair of robots talks through its own relay,
     which counts every byte Zenoh puts on the link and, in both directions: caps it at
@@ -199,14 +199,14 @@ class LinkOptions:
 
 @dataclass(frozen=True)
 class SecurityOptions:
-    """Who may join a robot's fleet and what it lets in (`gmmap.fleet.door`).
+    """Who may join a robot's fleet and what it lets in (`gmmap.fleet.security.door`).
 
-    ``credentials``: a member folder made by ``gmmap fleet add`` (`gmmap.fleet.credentials`).
-    With it, links are Zenoh TLS with mutual authentication against the fleet's authority,
-    Zenoh's access control lets each member publish only under its own name (a station
-    none), and every submap and advert is sealed by its robot and checked on arrival, relayed
-    or not. None: plain TCP and nothing sealed, for tests and trusted labs (with a warning).
-    Always: a message over ``max_bytes`` is refused, and so is a sender over ``rate``
+    ``credentials``: a member folder made by ``gmmap fleet add``
+    (`gmmap.fleet.security.credentials`). With it, links are Zenoh TLS with mutual authentication
+    against the fleet's authority, Zenoh's access control lets each member publish only under its
+    own name (a station none), and every submap and advert is sealed by its robot and checked on
+    arrival, relayed or not. None: plain TCP and nothing sealed, for tests and trusted labs (with a
+    warning). Always: a message over ``max_bytes`` is refused, and so is a sender over ``rate``
     messages/s (``burst`` at once; rate None: no limit)."""
 
     credentials: str | None = None
@@ -227,7 +227,7 @@ class SecurityOptions:
 
 @dataclass(frozen=True)
 class StationOptions:
-    """A base station (``gmmap station``, `gmmap.fleet.station`): its ``name`` in the fleet,
+    """A base station (``gmmap station``, `gmmap.fleet.node.station`): its ``name`` in the fleet,
     its catch-up round every ``sweep_s`` seconds, its live view (`gmmap.io.liveview`) updated
     every ``every_s`` seconds and served on ``host``: the data (Rerun gRPC) on ``grpc_port``,
     Rerun's web viewer on ``web_port`` (0: not served)."""

@@ -11,6 +11,7 @@ from gmmap.errors import TransportConfigError
 # Names become one key-expression chunk each: verbatim characters only ('?', '#', '@'), nothing
 # that needs escaping. Leading letter or digit.
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+PREFIX = "gmmap"  # every key expression's first chunk: gmmap/<fleet>/… (`gmmap.fleet.net.keys`)
 _IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
 _OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
 MODES = ("peer", "client")

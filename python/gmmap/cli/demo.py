@@ -40,7 +40,7 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.emulation import paced, rendezvous, start_relays
 from gmmap.eval.fleetrun import summarise
-from gmmap.fleet.access import secured
+from gmmap.fleet.security.access import secured
 from gmmap.fleet_options import TOPOLOGIES
 from gmmap.options import drift_overrides
 
@@ -64,14 +64,14 @@ def run_demo(
     ``crash`` (i, n): robot i is killed with SIGKILL once it has stored n submaps of its own,
     and started again on its store. ``secure``: a new fleet authority and credentials for each
     robot in ``out/fleet``, TLS links, access control and sealed submaps
-    (`gmmap.fleet.access`). ``station``: a ``gmmap station`` beside them, on the tree's station
-    section (`station_command`)."""
+    (`gmmap.fleet.security.access`). ``station``: a ``gmmap station`` beside them, on the tree's
+    station section (`station_command`)."""
     # The robots run in this interpreter: a missing fleet extra is named here, not in n logs.
     import zenoh  # noqa: F401
 
     # Below the ephemeral range: a relay's port or an outgoing connection cannot take one
     # before its robot listens on it.
-    from gmmap.fleet.keys import listen_port
+    from gmmap.fleet.net.keys import listen_port
 
     start = time.perf_counter()
     if out is None:
@@ -91,7 +91,7 @@ def run_demo(
     readers: list[threading.Thread] = []
     router = None
     if config.link.topology == "router":
-        from gmmap.fleet.session import open_router
+        from gmmap.fleet.net.session import open_router
 
         ports.append(listen_port())
         router = open_router(ports[-1], protocol=config.transport.link_protocol)
@@ -164,8 +164,8 @@ def _credentials(config: Config, folder: Path, fleet: str, names: list[str]) -> 
     member folder."""
     import shutil
 
-    from gmmap.fleet.access import issue_fleet
-    from gmmap.fleet.credentials import add_member
+    from gmmap.fleet.security.access import issue_fleet
+    from gmmap.fleet.security.credentials import add_member
 
     if config.link.topology == "router":
         raise InvalidInputError("--secure runs mesh or chain links; the router is not secured")
@@ -214,7 +214,7 @@ def _robot_config(
     """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints (through
     the ``relays`` where links are emulated). It waits at the start for the robots linked
     to it, on rendezvous links (``reach``) only for those in reach there."""
-    from gmmap.fleet.links import ZENOH_NO_GOSSIP
+    from gmmap.eval.links import ZENOH_NO_GOSSIP
 
     name = names[i]
     if relays and config.link.topology != "router":

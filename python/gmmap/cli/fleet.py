@@ -1,5 +1,5 @@
 """``gmmap fleet``: the fleet's credentials: an authority (CA), member keys and certificates,
-revocation (`gmmap.fleet.credentials`)."""
+revocation (`gmmap.fleet.security.credentials`)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def init(dir: Path, fleet: str) -> None:
     hold a fleet already. The CA key (DIR/ca.key) signs every member certificate and
     revocation: keep DIR off the robots.
     """
-    from gmmap.fleet.credentials import init_fleet
+    from gmmap.fleet.security.credentials import init_fleet
 
     authority = init_fleet(dir, fleet)
     expires = authority.certificate.not_valid_after_utc
@@ -67,7 +67,7 @@ def add(dir: Path, name: str, role: str, force: bool) -> None:
     restart those robots to let ROBOT in. A name in use is refused; a revoked one needs
     --force.
     """
-    from gmmap.fleet.credentials import add_member
+    from gmmap.fleet.security.credentials import add_member
 
     folder = add_member(dir, name, role, force=force)
     log(f"added {role} {name!r} → {folder} (copy that folder to the robot)")
@@ -83,7 +83,7 @@ def revoke(dir: Path, name: str) -> None:
     robots. A running robot takes its folder's new crl.pem in within seconds and refuses
     ROBOT's submaps from then on.
     """
-    from gmmap.fleet.credentials import revoke as revoke_member
+    from gmmap.fleet.security.credentials import revoke as revoke_member
 
     member = revoke_member(dir, name)
     log(f"revoked {member.role} {name!r} (serial {member.serial:x}); copy the crl.pem files")
@@ -96,7 +96,7 @@ def refresh(dir: Path) -> None:
 
     Robots refuse every peer once the CRL is stale (a year after it was signed).
     """
-    from gmmap.fleet.credentials import refresh_crl
+    from gmmap.fleet.security.credentials import refresh_crl
 
     crl = refresh_crl(dir)
     log(f"CRL re-signed, next update {crl.next_update_utc:%Y-%m-%d}; copy the crl.pem files")
@@ -111,7 +111,7 @@ def show(dir: Path, as_json: bool) -> None:
     Every certificate DIR's authority issued, with its status: active, revoked, expired, or
     missing (not revoked, but its member folder is gone).
     """
-    from gmmap.fleet.credentials import describe
+    from gmmap.fleet.security.credentials import describe
 
     fleet = describe(dir)
     if as_json:

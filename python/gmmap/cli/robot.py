@@ -98,8 +98,8 @@ def command(
 
     With --report R.json: R.config.yaml and, per robot held, R.trajectory_<robot>.txt (its
     optimised anchors in its group's reference frame, TUM format) beside it."""
-    from gmmap.fleet.robot import Built
-    from gmmap.fleet.runner import run_robot
+    from gmmap.fleet.node.robot import Built
+    from gmmap.fleet.node.runner import run_robot
 
     if config.security.credentials is None:
         plain = config.transport.link_protocol.upper()

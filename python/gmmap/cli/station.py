@@ -1,4 +1,4 @@
-"""``gmmap station``: watch a fleet live in the browser (`gmmap.fleet.station`,
+"""``gmmap station``: watch a fleet live in the browser (`gmmap.fleet.node.station`,
 `gmmap.io.liveview`)."""
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def command(
 
     The station sends nothing of its own (no adverts, no answers, no liveliness token); it
     catches up on what it missed by fetching. Open the printed address; Ctrl-C stops it."""
-    from gmmap.fleet.station import StationNode
+    from gmmap.fleet.node.station import StationNode
     from gmmap.io.liveview import LiveView
 
     o = config.station

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gmmap.fleet.store import Store
+from gmmap.fleet.storage.store import Store
 
 
 def lost(reports: dict[str, dict]) -> dict[str, int]:

@@ -1,5 +1,5 @@
 """The demo's emulated links (`gmmap.cli.demo`): robots paced on rendezvous links, who is in
-reach of whom, and a counting relay for every linked pair (`gmmap.fleet.links`)."""
+reach of whom, and a counting relay for every linked pair (`gmmap.eval.links`)."""
 
 from __future__ import annotations
 
@@ -30,9 +30,9 @@ def paced(config: Config, secure: bool = False) -> Config:
 
 
 def rendezvous(config: Config, max_frames: int | None = None):
-    """With rendezvous links, who is in reach of whom (`gmmap.fleet.links.Rendezvous`), from
+    """With rendezvous links, who is in reach of whom (`gmmap.eval.links.Rendezvous`), from
     the simulated robots' true positions on the paced robots' clock; else None."""
-    from gmmap.fleet.links import Rendezvous
+    from gmmap.eval.links import Rendezvous
     from gmmap.io.sim import simulate_options
 
     link, sim = config.link, config.sim
@@ -48,7 +48,7 @@ def start_relays(config: Config, ports: list[int], reach=None) -> dict:
     """With emulated links, one relay per linked pair (i < j, `LinkOptions.pairs`) in front
     of j's endpoint (``ports``: the robots', then the router's): i reaches j only through it,
     and with rendezvous links (``reach``) only while they are in reach of each other."""
-    from gmmap.fleet.datagrams import relay_for
+    from gmmap.eval.links.datagrams import relay_for
 
     if not config.link.shaped:
         return {}

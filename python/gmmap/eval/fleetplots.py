@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gmmap.fleet.store import Store
+from gmmap.fleet.storage.store import Store
 
 DESCRIPTOR_BYTES = 1024  # a 256-float descriptor, as the paper's Fig. 9 adds to the GMM
 

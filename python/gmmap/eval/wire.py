@@ -1,4 +1,4 @@
-"""What the emulated links carried (`gmmap.fleet.links.Relay` counts), per robot and per link."""
+"""What the emulated links carried (`gmmap.eval.links.Relay` counts), per robot and per link."""
 
 from __future__ import annotations
 

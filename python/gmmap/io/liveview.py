@@ -10,8 +10,8 @@ it, at its odometry pose (so it shows the moment it arrives; a robot not yet in 
 shown alone, in its own map frame); each robot's anchors and trajectory; the kept matches as
 segments between the two submaps' anchors. Beside them, as time series: per robot the bytes it
 sent and, per link, received (``links/received/<robot>/from_<peer>``, as the robots tell the
-station: `gmmap.fleet.linkstats`; the station's own too), and the submaps held. The timeline is
-``wall`` (clock time): the view grows as the fleet maps.
+station: `gmmap.fleet.sharing.linkstats`; the station's own too), and the submaps held. The timeline
+is ``wall`` (clock time): the view grows as the fleet maps.
 """
 
 from __future__ import annotations
