@@ -2,12 +2,12 @@
 
 Prints one JSON object. Each case runs the whole demo (`gmmap.cli.demo.run_demo`, robots as
 separate processes) with one counting relay between every two linked robots
-(`gmmap.fleet.links`): perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss
+(`gmmap.eval.links`): perfect links, per-link caps of 10 kB/s, 2 kB/s and 500 B/s, 30 % loss
 (a 0.2 s TCP stall per lost chunk), two partitions of 30 s, a chain (robot i linked to
 i + 1 only: the others' submaps go through the robots in between) and a router (every robot
 a Zenoh client of one router, linked to it alone), rendezvous links (up only while two
 robots are within 8 m, or in line of sight, the robots moving in step at twice their speed;
-`gmmap.fleet.links.Rendezvous`; Zenoh over UDP there, as the demo runs them, and the 8 m case
+`gmmap.eval.links.Rendezvous`; Zenoh over UDP there, as the demo runs them, and the 8 m case
 once more over TCP) and perfect links with robot 1 killed with SIGKILL after its
 third submap and restarted on its store, and perfect links over the first 100 frames (the
 difference to the whole run is what one more delivered submap costs on the wire, the

@@ -1,6 +1,6 @@
 """Merge: issue 7's figures from the offline pipeline (`gmmap.eval.merge.merge`), in one run.
 
-Prints one JSON object. Each case builds full-covariance 20-frame submaps per robot and merges
+Prints one JSON object. Each case builds submaps per robot with the defaults (by space) and merges
 them; against ground truth: every robot pair's relative pose where they met and of their map
 frames (`gmmap.eval.pairs`), the kept matches as registered and optimised, the ATE (evo) of all
 anchors before and after optimisation, as they are and rigidly aligned, and with injected wrong
@@ -13,7 +13,7 @@ matches how many were rejected:
 - cross-session cases (`gmmap.eval.sessions`, the defaults; joined or not, frame errors,
   verified precision and recall, points + GICP on the same candidates, the data's floor):
   fr1_xyz's first 400 frames against the recording re-sampled at 10 and 5 Hz from frame 201
-  (faster motion per frame, 20-frame submaps spanning 2 and 4 s), and
+  (faster motion per frame), and
   fr3 cabinet's loop (keyframes 0-14 against 43-57, which see the same side; 3 keyframes per
   submap, motion-capture odometry noise).
 
@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 from gmmap.config import Config
@@ -41,7 +40,7 @@ from gmmap.options import SimOptions
 DATA = Path(
     os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
 )
-BUILD = BuildOptions(frames_per_submap=20, covariance="full")
+BUILD = BuildOptions()  # the defaults: submaps by space
 KEYS = ("groups", "candidates", "verified", "accepted_edges", "rejected_edges", "pairs",
         "match_errors", "ate_before_m", "ate_after_m", "ate_aligned_before_m",
         "ate_aligned_after_m", "injected_wrong", "time_s")  # fmt: skip
@@ -95,7 +94,7 @@ def cross_sessions() -> dict:
         cases[f"tum_fr1_xyz_second_session_{rate}hz"] = (frames[0:400], resampled, Config())
     frames = datasets.open(cabinet)
     config = Config(
-        build=replace(Config().build, frames_per_submap=3),
+        build=Config().build.by_frames(3),
         backend=BackendOptions.for_drift(0.002),
     )
     cases["tum_fr3_cabinet_loop"] = (frames[0:15], frames[43:], config)

@@ -59,9 +59,7 @@ def selection_figures(frames, frames_per_submap: int) -> dict:
     from gmmap.mapping.submap import BuildOptions, build_submaps, select_and_refine
     from gmmap.math.select import SelectOptions, select_components
 
-    opts = BuildOptions(
-        frames_per_submap=frames_per_submap, covariance="diag", select=False, holdout=0.1
-    )
+    opts = BuildOptions(covariance="diag", select=False, holdout=0.1).by_frames(frames_per_submap)
     submaps = list(build_submaps(frames, "bench", opts))[:6]
     rows, sweep = [], {(t, r): [] for t in THRESHOLDS for r in (False, True)}
     for s in submaps:
@@ -131,7 +129,7 @@ frames = open_data(sys.argv[1], stride=int(sys.argv[2]))[:40]
 times = []
 for rep in range(3):
     b = SubmapBuilder(
-        options=BuildOptions(frames_per_submap=40, covariance="diag", min_novelty=0.0)
+        options=BuildOptions(covariance="diag", min_novelty=0.0).by_frames(40)
     )
     start = time.perf_counter()
     for f in frames:
@@ -177,12 +175,8 @@ def fig2() -> dict:
         gmms = []
         for robot in run:
             opts = BuildOptions(
-                frames_per_submap=len(robot),
-                strategy=strategy,
-                covariance="diag",
-                min_novelty=0.0,
-                select=False,
-            )
+                strategy=strategy, covariance="diag", min_novelty=0.0, select=False
+            ).by_frames(len(robot))
             (s,) = build_submaps([robot[i] for i in range(len(robot))], robot.name, opts)
             gmms.append(s.gmm.transform(s.gt_anchor))
         out[strategy] = {

@@ -4,7 +4,7 @@ Beside a robot process of the same run.
 
 Prints one JSON object. Per fleet size, ``gmmap demo --station`` (simulated robots as
 processes, the station as one more, its Rerun view served and recorded): the station's CPU
-seconds and peak resident memory (`gmmap.fleet.runner.resources`, its own process), against
+seconds and peak resident memory (`gmmap.fleet.node.report.resources`, its own process), against
 the mean robot process's (the baseline: the station maps every robot's submaps, a robot its
 own and those it receives); the submaps it held and showed against those built; the latency
 from a robot building and sending a submap to the view first showing it (clock times on one

@@ -217,9 +217,9 @@ def test_eval_merge_reports_sessions_against_truth():
 
 def test_fr1_xyz_as_a_second_session_joins(shared_data):
     """fr1_xyz's first 400 frames against the whole recording re-sampled at 10 Hz from another
-    start (other submap boundaries): the maps join, and every verified match is within the
-    0.2 m / 3° of `is_correct`. Against one submap a few end 3.7-4° off (the GMM objective's
-    optimum sits there); refined against the candidate's neighbours, none does."""
+    start: the maps join, and every verified match (10 with the default submaps by space) is
+    within the 0.2 m / 3° of `is_correct`. Against one submap a few end 3.7-4° off (the GMM
+    objective's optimum sits there); refined against the candidate's neighbours, none does."""
     from gmmap.eval.sessions import evaluate_sessions
 
     frames = TumRgbd(shared_data / "tum_fr1_xyz")
@@ -229,7 +229,7 @@ def test_fr1_xyz_as_a_second_session_joins(shared_data):
         "b": list(build_submaps([frames[i] for i in range(201, len(frames), 3)], "b", build)),
     }
     r = evaluate_sessions(sessions, gicp=False)
-    assert r["joined"] and r["precision"] == 1.0 and r["verified"] >= 30
+    assert r["joined"] and r["precision"] == 1.0 and r["verified"] >= 8
     assert r["kept_precision"] == 1.0
     assert r["frame_t_error"] < 0.04 and r["frame_r_error_deg"] < 1.5
 

@@ -116,8 +116,8 @@ def sim_frames():
     ("strategy", "count", "frames"), [("points", 3, 4), ("gmm-merge", 3, 4), ("per-frame", 12, 1)]
 )
 def test_each_strategy_makes_its_submaps(sim_frames, strategy, count, frames):
-    opts = BuildOptions(
-        frames_per_submap=4, strategy=strategy, n_components=40, min_novelty=0.0, holdout=0.1
+    opts = BuildOptions(strategy=strategy, n_components=40, min_novelty=0.0, holdout=0.1).by_frames(
+        4
     )
     submaps = list(build_submaps(sim_frames, "r1", opts))
     assert len(submaps) == count
@@ -145,7 +145,7 @@ def test_novelty_check_skips_repeated_frames(sim_frames):
 
 
 def test_submaps_round_trip_through_files(sim_frames, tmp_path):
-    opts = BuildOptions(frames_per_submap=6, n_components=20, holdout=0.1)
+    opts = BuildOptions(n_components=20, holdout=0.1).by_frames(6)
     submaps = list(build_submaps(sim_frames, "r2", opts))
     index = write_submaps(submaps, tmp_path, source="sim", options=opts)
     assert index["robot"] == "r2" and index["options"]["frames_per_submap"] == 6
@@ -221,8 +221,12 @@ def test_submaps_by_space_close_at_the_same_places_at_any_rate():
 
 def test_the_frame_count_caps_a_submap_by_space(sim_frames):
     opts = BuildOptions(
-        frames_per_submap=3, submap_distance=100.0, n_components=10, min_novelty=0.0
+        frames_per_submap=3,
+        submap_distance=100.0,
+        submap_angle=None,
+        n_components=10,
+        min_novelty=0.0,
     )
     assert [s.stats["frames"] for s in build_submaps(sim_frames, "r", opts)] == [3, 3, 3, 3]
     with pytest.raises(InvalidInputError):
-        BuildOptions(submap_distance=0.0)
+        BuildOptions(submap_distance=-1.0)

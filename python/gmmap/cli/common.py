@@ -177,13 +177,13 @@ SUBMAP_SIZE = (
     setting(
         "--submap-distance",
         "build.submap_distance",
-        "Close a submap after this much odometry path (m).",
+        "Close a submap after this much odometry path (m; 0: off).",
         type=float,
     ),
     setting(
         "--submap-angle",
         "build.submap_angle",
-        "Close a submap after turning this much (degrees).",
+        "Close a submap after turning this much (degrees; 0: off).",
         type=float,
     ),
 )

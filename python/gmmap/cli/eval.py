@@ -174,7 +174,13 @@ def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> s
     help="A recording split into two robots (first and second half); default: the simulator.",
 )
 @sim_settings
-@submap_size
+@click.option(
+    "--frames-per-submap",
+    type=click.IntRange(min=1),
+    default=20,
+    show_default=True,
+    help="Frames per submap (the paper's protocol, by frame count).",
+)
 @COVARIANCE
 @setting("--top-k", "place.top_k", "Candidates verified per query.", type=int)
 @DESCRIPTOR
@@ -187,7 +193,12 @@ def _registration_table(r: dict, frames_per_submap: int, global_mode: bool) -> s
 @config_option
 @as_json_option
 def eval_place(
-    data: Path | None, no_gicp: bool, plots: Path | None, config: Config, as_json: bool
+    data: Path | None,
+    frames_per_submap: int,
+    no_gicp: bool,
+    plots: Path | None,
+    config: Config,
+    as_json: bool,
 ) -> None:
     """Place recognition recall and verified precision (the paper's Fig. 7 and 8)."""
     from gmmap.eval import place
@@ -196,10 +207,10 @@ def eval_place(
     b, s = config.build, config.sim
     if data is not None:
         frames = datasets.open(data)
-        place_set = place.split_place_set(frames, b.frames_per_submap, log, b.covariance)
+        place_set = place.split_place_set(frames, frames_per_submap, log, b.covariance)
     else:
         place_set = place.sim_place_set(
-            s.world, s.robots, s.seed, b.frames_per_submap, log, s.sensor, b.covariance
+            s.world, s.robots, s.seed, frames_per_submap, log, s.sensor, b.covariance
         )
     r = place.evaluate_place(place_set, config.place, progress=log, gicp=not no_gicp)
     if plots:

@@ -271,9 +271,7 @@ def sim_place_set(
     for r in run:
         if progress:
             progress(f"building {r.name}'s submaps ({len(r)} frames)")
-        options = BuildOptions(
-            frames_per_submap=frames_per_submap, seed=seed, covariance=covariance
-        )
+        options = BuildOptions(seed=seed, covariance=covariance).by_frames(frames_per_submap)
         submaps += build_submaps(r, r.name, options)
     return PlaceSet(submaps, positives(submaps))
 
@@ -286,7 +284,7 @@ def split_place_set(
 ) -> PlaceSet:
     """One recording as two robots: its first and second half."""
     half = len(frames) // 2
-    options = BuildOptions(frames_per_submap=frames_per_submap, covariance=covariance)
+    options = BuildOptions(covariance=covariance).by_frames(frames_per_submap)
     submaps = []
     for name, part in (("first", frames[:half]), ("second", frames[half:])):
         if progress:

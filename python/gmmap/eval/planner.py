@@ -54,12 +54,7 @@ def map_scene(
 
     (robot,) = simulate(world, robots=1, seed=seed, sensor=Lidar())
     frames = list(robot)
-    options = BuildOptions(
-        frames_per_submap=frames_per_submap,
-        n_components=n_components,
-        covariance="full",
-        seed=seed,
-    )
+    options = BuildOptions(n_components=n_components, seed=seed).by_frames(frames_per_submap)
     submaps = list(build_submaps(frames, robot.name, options))
     poses = {(s.robot, s.seq): s.anchor for s in submaps}
     gmm = build_global_map(submaps, poses, robot.name).gmm.transform(robot.map_to_world)

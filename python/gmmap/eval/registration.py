@@ -132,7 +132,7 @@ def build_pairs(
     identity, the relative pose of the frames' odometry (``odometry_guess``) or the truth turned
     by ``guess_deg``; in the global mode the source is perturbed."""
     f = frames_per_submap
-    base = BuildOptions(**{**options.__dict__, "frames_per_submap": f, "min_novelty": 0.0})
+    base = replace(options.by_frames(f), min_novelty=0.0)
     submaps: dict[str, list[Submap]] = {}
     for strategy in ("points", "gmm-merge", "per-frame"):
         if strategy not in methods and not (strategy == "points" and "gicp" in methods):

@@ -7,6 +7,8 @@ otherwise), then, from the outside:
 
 - ``joined``: all sessions ended in one group; ``frame_t_error`` / ``frame_r_error_deg``: the
   worst robot pair's map-frame error against the truth (None when not joined);
+- ``positives``: the submap pairs of two sessions whose views overlap at the truth
+  (`gmmap.eval.place.positives`), and ``positives_by_robots`` per robot pair ("a|b");
 - ``precision`` / ``recall`` of the verified (accepted) matches: a match is correct when its
   two submaps are a positive (views overlapping at the truth, `gmmap.eval.place.positives`) and
   its transform is within 0.2 m and 3° of the truth; recall counts over every positive pair of
@@ -57,6 +59,7 @@ def evaluate_sessions(
             max((p["frame_r_error_deg"] for p in pairs), default=None) if joined else None
         ),
         "positives": int(pos.sum() // 2),
+        "positives_by_robots": by_robots(pos, [robot for robot, _ in order]),
         "candidates": len(mapper.matches),
         **verification(mapper.matches, held, pos, index),
         "kept_precision": kept_precision(mapper, held, pos, index),
@@ -66,6 +69,15 @@ def evaluate_sessions(
         out["gicp"] = gicp_verification(mapper.matches, held, pos, index, out["positives"])
         voxel = (config or Config()).build.voxel_size
         out["floor"] = floor(mapper.matches, held, pos, index, voxel)
+    return out
+
+
+def by_robots(pos: np.ndarray, robots: Sequence[str]) -> dict[str, int]:
+    """The positive pairs per robot pair, keyed "a|b" (a < b)."""
+    out: dict[str, int] = {}
+    for i, j in zip(*np.nonzero(np.triu(pos)), strict=True):
+        key = "|".join(sorted((robots[i], robots[j])))
+        out[key] = out.get(key, 0) + 1
     return out
 
 

@@ -1,4 +1,4 @@
-"""Live input for a robot node (`gmmap.fleet.robot.RobotNode.start_live`): frames and poses
+"""Live input for a robot node (`gmmap.fleet.node.robot.RobotNode.start_live`): frames and poses
 pushed by any driver (a ROS callback, a camera SDK), each frame given its pose at its stamp.
 
 - `LiveInput.push_pose(stamp, pose)`: the robot's base in its map frame (odometry, or TF

@@ -177,6 +177,14 @@ class SubmapBuilder:
         self.travelled, self.turned = carry
         return submap
 
+    def resume(self, pose: np.ndarray, travelled: float = 0.0, turned: float = 0.0) -> None:
+        """Continue where a builder stopped right after a submap (a robot restarting on its
+        store): ``pose`` of the frame that closed it and the motion carried past its limit
+        (``travelled``, ``turned`` as they were then), so the next submaps close where the
+        uninterrupted builder's would."""
+        self._last_pose = np.asarray(pose, dtype=float)
+        self.travelled, self.turned = travelled, turned
+
     def _move(self, pose: np.ndarray) -> None:
         """Adds the motion from the previous frame to this submap's: from the frame that closed
         the last submap on, so that no step between submaps is lost at a low rate."""
@@ -192,9 +200,9 @@ class SubmapBuilder:
         """The motion past the limit that closed the submap, which the next one starts with:
         so boundaries fall every ``submap_distance`` m of path whatever the frame rate."""
         o = self.options
-        if o.submap_distance is not None and self.travelled >= o.submap_distance:
+        if o.submap_distance and self.travelled >= o.submap_distance:
             return self.travelled % o.submap_distance, 0.0
-        if o.submap_angle is not None and self.turned >= o.submap_angle:
+        if o.submap_angle and self.turned >= o.submap_angle:
             return 0.0, self.turned % o.submap_angle
         return 0.0, 0.0
 
@@ -203,8 +211,8 @@ class SubmapBuilder:
         o = self.options
         if len(self.stamps) >= self.frames_per_submap:
             return True
-        return (o.submap_distance is not None and self.travelled >= o.submap_distance) or (
-            o.submap_angle is not None and self.turned >= o.submap_angle
+        return bool(o.submap_distance and self.travelled >= o.submap_distance) or bool(
+            o.submap_angle and self.turned >= o.submap_angle
         )
 
     def flush(self) -> Submap | None:

@@ -72,6 +72,7 @@ __all__ = ["Arrived", "Built", "RobotNode"]
 log = logging.getLogger(__name__)
 
 META_FRAMES = "frames_consumed"
+META_CARRIED = "motion_carried"  # the builder's travelled and turned after its last submap
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
@@ -249,25 +250,28 @@ class RobotNode(Fetching, Lingering):
             builder.seq = 0 if last is None else last + 1
             i = self.frames_consumed
             live = isinstance(frames, LiveInput)
+            if i > 0 and not live:
+                carried = self.store.get_meta(META_CARRIED, "0 0") or "0 0"
+                builder.resume(frames[i - 1].pose, *map(float, carried.split()))
             for frame in iter(frames) if live else (frames[j] for j in range(i, len(frames))):
                 if self.stopping:
                     break
                 s = builder.add(frame)
                 i += 1
                 if s is not None:
-                    self._emit(s, i)
+                    self._emit(s, i, builder)
             if not self.stopping and i > self.frames_consumed:
                 s = builder.flush()
                 if s is not None:
-                    self._emit(s, i)
+                    self._emit(s, i, builder)
         except Exception:
             log.exception("%s: construction failed", self.robot)
 
-    def _emit(self, s: Submap, consumed: int) -> None:
+    def _emit(self, s: Submap, consumed: int, builder: SubmapBuilder) -> None:
         payload = self.door.seal(self.robot, KIND, s.seq, encode(s))
-        self.store.put_submap(
-            self.robot, s.seq, payload, own=True, meta={META_FRAMES: str(consumed)}
-        )
+        carried = f"{builder.travelled!r} {builder.turned!r}"
+        meta = {META_FRAMES: str(consumed), META_CARRIED: carried}
+        self.store.put_submap(self.robot, s.seq, payload, own=True, meta=meta)
         self.frames_consumed = consumed
         self.counts["built"] += 1
         self.wire[s.seq] = {**sizes_of(s, len(payload), s.n_points), "built_at": time.time()}
