@@ -1,6 +1,6 @@
 """The fleet's sections of the configuration (`gmmap.config`, re-exported by `gmmap.options`):
 a robot's transport, its node, its security, and the demo's emulated links. Like
-`gmmap.options`, nothing heavy is imported here.
+`gmmap.options`, nothing heavy is imported here, and each field's meaning is its ``#:`` comment.
 """
 
 from __future__ import annotations
@@ -30,13 +30,17 @@ class TransportOptions:
     are raw Zenoh configuration entries (``{"transport/link/tx/lease": 5000}``) applied last.
     """
 
+    #: Zenoh listen endpoints; null: one loopback endpoint on port
     listen: tuple[str, ...] | None = None
-    port: int = 0
-    connect: tuple[str, ...] = ()
-    mode: str = "peer"
+    port: int = 0  #: Port of the loopback listen endpoint; 0: a free one
+    connect: tuple[str, ...] = ()  #: Zenoh endpoints of other robots to connect to
+    mode: str = "peer"  #: Zenoh mode: peer or client
+    #: tcp or udp (datagrams, no retransmission); null: TCP, or TLS when secured
     protocol: str | None = None
+    #: Zenoh multicast scouting: meet peers on the network without connect
     multicast_scouting: bool = False
-    fetch_timeout: float = 2.0
+    fetch_timeout: float = 2.0  #: Seconds a query to peers waits for answers
+    #: Raw Zenoh configuration entries, applied last
     zenoh_options: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -93,17 +97,20 @@ class RobotOptions:
     frames end or an advert is due (1: each at once). None: ``DEFAULT_BUNDLE``, or 1 where
     `gmmap demo` emulates links that come and go: a passing contact cannot wait."""
 
-    name: str = "robot"
-    fleet: str = "gmmap"
-    store: str | None = None
-    wait_for: tuple[str, ...] = ()
-    wait_timeout: float = 30.0
-    linger: float = 5.0
-    deadline: float = 120.0
+    name: str = "robot"  #: This robot's name (unique in the fleet)
+    fleet: str = "gmmap"  #: The fleet's name: robots of other fleets are ignored
+    store: str | None = None  #: The robot's SQLite store; null: a temporary one, lost on exit
+    wait_for: tuple[str, ...] = ()  #: Peers to wait for before consuming frames
+    wait_timeout: float = 30.0  #: Seconds to wait for them, at most
+    linger: float = 5.0  #: Seconds it keeps receiving, matching and optimising after its frames end
+    deadline: float = 120.0  #: Latest end, seconds after its frames, peers complete or not
+    #: At the end, judge every held pair again in one call, as an offline merge
     rejudge: bool = True
+    #: Bytes/s of payload and keys per link, in priority order; null: no cap
     budget: float | None = None
+    #: Own submaps sent together; null: 3, or 1 on the demo's come-and-go links
     bundle: int | None = None
-    bundle_wait: float = 8.0
+    bundle_wait: float = 8.0  #: Seconds a submap waits at most for the rest of its bundle
 
     @property
     def bundle_size(self) -> int:
@@ -143,15 +150,19 @@ class LinkOptions:
     within ``range_m`` metres and, with ``line_of_sight``, nothing of the world stands between.
     """
 
-    emulate: bool = False
-    rate: float | None = None
-    delay_s: float = 0.0
-    loss: float = 0.0
-    stall_s: float = 0.2
+    emulate: bool = False  #: Robot pairs talk through counting relays
+    rate: float | None = None  #: Each link's cap, bytes/s each way; null: no cap
+    delay_s: float = 0.0  #: Each link's one-way delay (s)
+    loss: float = 0.0  #: Chance a chunk stalls for stall_s (TCP) or is dropped (UDP)
+    stall_s: float = 0.2  #: Seconds a lost chunk stalls (TCP's retransmission)
+    #: (start, end) seconds after the relays start, during which nothing moves
     outages: tuple[tuple[float, float], ...] = ()
-    seed: int = 0
+    seed: int = 0  #: Seed of the losses
+    #: Which robots are linked: mesh (all pairs), chain (i to i + 1) or router
     topology: str = "mesh"
+    #: Rendezvous: a link is up only while its robots are this close (m)
     range_m: float | None = None
+    #: Rendezvous: a link is up only while nothing of the world stands between
     line_of_sight: bool = False
 
     def __post_init__(self) -> None:
@@ -209,10 +220,11 @@ class SecurityOptions:
     warning). Always: a message over ``max_bytes`` is refused, and so is a sender over ``rate``
     messages/s (``burst`` at once; rate None: no limit)."""
 
+    #: Member folder from gmmap fleet add (TLS, sealed submaps); null: unsecured
     credentials: str | None = None
-    max_bytes: int = 256 * 1024
-    rate: float | None = 50.0
-    burst: int = 500
+    max_bytes: int = 256 * 1024  #: A message over this many bytes is refused
+    rate: float | None = 50.0  #: Messages/s a sender may send before it is refused; null: no limit
+    burst: int = 500  #: Messages a sender may send at once
 
     def __post_init__(self) -> None:
         if isinstance(self.max_bytes, bool) or not isinstance(self.max_bytes, int):
@@ -232,12 +244,12 @@ class StationOptions:
     every ``every_s`` seconds and served on ``host``: the data (Rerun gRPC) on ``grpc_port``,
     Rerun's web viewer on ``web_port`` (0: not served)."""
 
-    name: str = "station"
-    sweep_s: float = 5.0
-    every_s: float = 1.0
-    host: str = "127.0.0.1"
-    grpc_port: int = 9876
-    web_port: int = 9090
+    name: str = "station"  #: The station's name in the fleet
+    sweep_s: float = 5.0  #: Seconds between catch-up rounds
+    every_s: float = 1.0  #: Seconds between live-view updates
+    host: str = "127.0.0.1"  #: Address to serve the view on
+    grpc_port: int = 9876  #: Where the view data is served (Rerun gRPC)
+    web_port: int = 9090  #: Where Rerun's web viewer is served; 0: not served
 
     def __post_init__(self) -> None:
         check_name("station.name", self.name, InvalidInputError)

@@ -3,7 +3,8 @@
 One frozen dataclass per stage of the data flow (build, select, register, place, backend,
 transport, robot, planner, sim). The stages take their section; the Rust core receives every
 value it uses from here. This module imports nothing heavy (no GTSAM, no Zenoh), so a core
-install can read, validate and dump a configuration.
+install can read, validate and dump a configuration. Each field's meaning is its ``#:``
+comment, beside it or right above it (`gmmap.config_doc`); plain ``#`` comments say why.
 """
 
 from __future__ import annotations
@@ -68,21 +69,21 @@ class BuildOptions:
     rotation) and the refit after selection produces full ones anyway.
     """
 
-    frames_per_submap: int = 100
-    submap_distance: float | None = 2.0
-    submap_angle: float | None = 90.0
-    voxel_size: float = 0.05
-    strategy: str = "points"
-    n_components: int = 100
-    covariance: str = "full"
-    min_novelty: float = 0.05  # fraction of a frame's voxels that must be new
-    select: bool = True
-    refine_iter: int = 10  # EM iterations (full covariances) after selection; 0: none
-    holdout: float = 0.0  # fraction of buffered points withheld from fitting, for evaluation
-    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # map frame's up; None: no levelling
-    max_iter: int = 100
-    tol: float = 1e-3
-    seed: int = 0
+    frames_per_submap: int = 100  #: Accepted frames per submap; the most when by distance or angle
+    submap_distance: float | None = 2.0  #: Odometry path (m) that closes a submap; 0 or null: off
+    submap_angle: float | None = 90.0  #: Degrees turned that close a submap; 0 or null: off
+    voxel_size: float = 0.05  #: Point-buffer voxel size (m)
+    strategy: str = "points"  #: Fitting: points (one GMM), gmm-merge (one per frame) or per-frame
+    n_components: int = 100  #: Components fitted per submap, before model selection
+    covariance: str = "full"  #: Covariance type of the fitted components: diag or full
+    min_novelty: float = 0.05  #: Skip a frame unless this fraction of its voxels is new
+    select: bool = True  #: Adaptive model selection: merge redundant components (section select)
+    refine_iter: int = 10  #: EM iterations (full covariances) after selection; 0: none
+    holdout: float = 0.0  #: Fraction of buffered points withheld from fitting, for evaluation
+    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  #: Map frame's up; null: no levelling
+    max_iter: int = 100  #: EM iterations of a submap's fit, at most
+    tol: float = 1e-3  #: EM convergence tolerance of a submap's fit
+    seed: int = 0  #: Seed of the EM fit and of the holdout draw
 
     def __post_init__(self) -> None:
         if self.strategy not in STRATEGIES:
@@ -116,9 +117,9 @@ class SelectOptions:
     the submap builder's refit afterwards (``BuildOptions.refine_iter``) more than wins it back.
     """
 
-    flat_ratio: float = 0.1
-    max_distance: float = 2.0
-    kl_threshold: float = 16.0
+    flat_ratio: float = 0.1  #: Flat: least variance under this share of the middle one
+    max_distance: float = 2.0  #: Only components whose means are closer than this (m) are compared
+    kl_threshold: float = 16.0  #: Pairs under this symmetric Kullback-Leibler divergence merge
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.max_distance) and self.max_distance > 0):
@@ -145,18 +146,20 @@ class RegisterOptions:
     reflects shared geometry rather than how sharply each side was fitted.
     """
 
+    #: From a guess: std devs (m) added to every covariance, coarse to fine
     local_scales: tuple[float, ...] = (0.2, 0.1, 0.05, 0.0)
+    #: Without a guess (global search): std devs (m) added, coarse to fine
     global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
-    max_iter: int = 10  # Levenberg-Marquardt iterations per scale
+    max_iter: int = 10  #: Levenberg-Marquardt iterations per scale
     # From a guess, scales >= 10 cm (but the last) see the mixtures merged in cells of this
     # many times the scale (`gmmap.math.register`); 0: the whole mixtures at every scale.
-    coarse_cell: float = 2.0
-    yaw_starts: int = 12
-    dof: int = 6  # 4: x, y, z and yaw only (ground robots)
-    information_scale: float | None = None
-    confidence_scale: float = 0.05
-    tol: float = 1e-5  # a scale ends when the step is smaller (radians + metres)
-    cutoff: float = 4.0  # component pairs farther apart than this many σ are skipped
+    coarse_cell: float = 2.0  #: From a guess, coarse scales merge mixtures in cells of this × scale
+    yaw_starts: int = 12  #: Rotations about +z a global search starts from
+    dof: int = 6  #: Degrees of freedom: 6, or 4 (x, y, z and yaw only: ground robots)
+    information_scale: float | None = None  #: Measurements counted; null: smaller component count
+    confidence_scale: float = 0.05  #: σ (m) added to every covariance to measure the confidence C
+    tol: float = 1e-5  #: A scale ends when the step is smaller (radians + metres)
+    cutoff: float = 4.0  #: Component pairs farther apart than this many σ are skipped
 
     def __post_init__(self) -> None:
         if self.dof not in (4, 6):
@@ -206,32 +209,32 @@ class PlaceOptions:
 
     # "shape": the training-free D2 descriptor; "learned": PointNetVLAD
     # (`gmmap.mapping.learned`), with ``weights`` (null: the ones shipped with gmmap).
-    descriptor: str = "shape"
-    weights: str | None = None
-    top_k: int = 5
+    descriptor: str = "shape"  #: Place descriptor: shape (training-free) or learned (PointNetVLAD)
+    weights: str | None = None  #: Learned descriptor's weights; null: those shipped with gmmap
+    top_k: int = 5  #: Candidates verified per query
     # The candidates' cosine distance limit; null: the descriptor's own (shape 0.1; learned:
     # set by its training run).
-    max_distance: float | None = None
-    min_confidence: float = 0.55
+    max_distance: float | None = None  #: Candidates' cosine distance limit; null: descriptor's
+    min_confidence: float = 0.55  #: Least confidence C of an accepted match (the paper's C_thr)
     # Reject when another basin scores this close to the best (alternative / confidence):
     # the geometry is ambiguous, e.g. a corridor seen end for end.
-    max_ambiguity: float = 0.7
+    max_ambiguity: float = 0.7  #: Score falls to 0 as the best other basin rises from this·C to C
     # Reject when another verified candidate of the same query, in the same robot's map but
     # more than conflict_distance m or conflict_angle degrees away, scores this close
     # (`place.distinct`).
-    max_conflict: float = 0.8
-    conflict_distance: float = 1.0
-    conflict_angle: float = 10.0
-    skip_recent: int = 2
-    resample_points: int = 4096  # as PointNetVLAD's input
-    use_yaw_hint: bool = False  # the descriptor's yaw instead of the full yaw search
-    refine_neighbours: int = 2
-    max_refine_shift: float = 0.15
+    max_conflict: float = 0.8  #: Reject if a candidate elsewhere in that map verifies this close
+    conflict_distance: float = 1.0  #: Elsewhere, for max_conflict: more than this far (m)
+    conflict_angle: float = 10.0  #: ... or turned more than this (degrees)
+    skip_recent: int = 2  #: A robot's latest own submaps, not candidates (they overlap the query)
+    resample_points: int = 4096  #: Points sampled from a mixture to describe it (PointNetVLAD's)
+    use_yaw_hint: bool = False  #: Verify from the descriptor's yaw instead of the full yaw search
+    refine_neighbours: int = 2  #: Refine a match over the candidate robot's submaps ±this; 0: off
+    max_refine_shift: float = 0.15  #: Reject a match the refinement moves more than this (m)
     # Refuse a match unless both submaps' confusion (`gmmap.mapping.confusion`: the best C
     # each reaches against its own robot's submaps that odometry puts apart, over up to
     # confusion_probes of them) stays under max_confusion·C. 0 probes: no such test.
-    max_confusion: float = 0.85
-    confusion_probes: int = 3
+    max_confusion: float = 0.85  #: Refuse a match unless both submaps' confusion stays under this·C
+    confusion_probes: int = 3  #: Own distant submaps confusion is measured against; 0: no test
 
     def __post_init__(self) -> None:
         if (
@@ -272,21 +275,21 @@ class BackendOptions:
     fr1_xyz halves comes to 2.3 cm / 1.0° instead of 3.8 cm / 1.5° with 1 cm / 0.3° floors.
     """
 
-    translation: float = 0.02
-    translation_floor: float = 0.001
-    rotation_per_rad: float = 0.02
-    rotation_per_m: float = 0.005
-    rotation_floor: float = 0.001
-    match_sigma_translation: float = 0.05  # m, for a match given without information
-    match_sigma_rotation: float = 0.02  # rad, idem
-    match_floor_translation: float = 0.03
-    match_floor_rotation: float = 0.017
-    pcm: bool = True
+    translation: float = 0.02  #: Odometry translation σ per metre travelled, each axis
+    translation_floor: float = 0.001  #: Odometry translation σ per step (m; > 0 for a still robot)
+    rotation_per_rad: float = 0.02  #: Odometry rotation σ per radian turned (rad)
+    rotation_per_m: float = 0.005  #: Odometry rotation σ per metre travelled (rad)
+    rotation_floor: float = 0.001  #: Odometry rotation σ per step (rad; > 0 for a still robot)
+    match_sigma_translation: float = 0.05  #: Match translation σ (m) where it has no information
+    match_sigma_rotation: float = 0.02  #: Match rotation σ (rad) where it has no information
+    match_floor_translation: float = 0.03  #: Translation σ (m) added in quadrature to every match
+    match_floor_rotation: float = 0.017  #: Rotation σ (rad) added in quadrature to every match
+    pcm: bool = True  #: Pairwise consistency maximisation: keep each robot pair's consistent set
     # χ² quantile of the pairwise test. Lenient on purpose: with m true matches between two
     # robots about m²(1 − p)/2 true pairs fail and the clique loses up to one match per failed
     # pair, while random wrong matches sit at d² in the thousands; GNC judges what passes.
-    pcm_probability: float = 0.999
-    pcm_exact_budget: int = 5_000  # branch-and-bound nodes per robot pair
+    pcm_probability: float = 0.999  #: χ² quantile of PCM's pairwise consistency test
+    pcm_exact_budget: int = 5_000  #: Branch-and-bound nodes of PCM's exact search, per robot pair
     # Two robots' maps join only once their mutually consistent matches hold min_matches
     # matches, or min_strong_matches of confidence >= strong_confidence (a match given without
     # a confidence counts as strong); fewer are held back ("pending") until more arrive. One
@@ -295,24 +298,24 @@ class BackendOptions:
     # two consecutive submaps of robots passing a symmetric corridor in opposite directions
     # even agree on one such flip. Weak matches (C 0.55-0.75: two sessions' submaps of one
     # desk, partly overlapping) need more agreement than strong ones.
-    min_matches: int = 4
-    min_strong_matches: int = 3
-    strong_confidence: float = 0.75
+    min_matches: int = 4  #: Consistent matches before two robots' maps join
+    min_strong_matches: int = 3  #: ... or this many strong ones (confidence >= strong_confidence)
+    strong_confidence: float = 0.75  #: Confidence from which a match counts as strong
     # ... and only while the consistent set is at least this share of all the matches verified
     # between them: most verified matches disagreeing is ambiguous geometry (a floor that fills
     # every mixture, a symmetric object seen from the other side), not two matched places.
-    min_consistent_share: float = 0.5
+    min_consistent_share: float = 0.5  #: Join only while consistent matches are this share of all
     # ... and only while no path through a third robot, both of whose matches are strong and
     # more confident than their median match, puts them elsewhere: this far (m) or turned
     # this much (degrees) at the path's submap (`gmmap.mapping.consistency.contradicted`).
     # Odometry drift between the path's submaps must stay under these (simulated LiDAR
     # fleets: at most 0.5 m and 3.5° on true paths; a corridor seen end for end: 180°).
-    path_distance: float = 2.0
-    path_angle_deg: float = 15.0
-    gnc: bool = True
-    gnc_probability: float = 0.99  # χ² quantile of GNC's inlier threshold
-    prior_sigma: float = 1e-4  # the reference prior (m and rad)
-    max_iterations: int = 100  # Levenberg-Marquardt, per GNC step
+    path_distance: float = 2.0  #: A path via a third robot this far off (m) contradicts a join
+    path_angle_deg: float = 15.0  #: ... or turned this much (degrees)
+    gnc: bool = True  #: Graduated non-convexity: the solve judges matches and drops outliers
+    gnc_probability: float = 0.99  #: χ² quantile of GNC's inlier threshold
+    prior_sigma: float = 1e-4  #: σ of the reference prior (m and rad)
+    max_iterations: int = 100  #: Levenberg-Marquardt iterations, per GNC step
 
     @classmethod
     def for_drift(cls, drift: float, **options: Any) -> BackendOptions:
@@ -357,17 +360,17 @@ class PlannerOptions:
     """Robot size and the planner's rule (`gmmap.mapping.planner`). Heights are in the map frame
     (floor at z = 0)."""
 
-    robot_radius: float = 0.2
-    margin: float = 0.05  # kept beyond the radius (the A* baseline inflates by one 5 cm cell)
-    z_band: tuple[float, float] = (0.05, 1.2)  # heights the robot's body occupies
-    step: float = 0.1  # metres per step
-    g_thr: float = 1.5  # directional gradient threshold (occupancy per metre)
-    min_support: float = 0.05  # density, relative to the map's median, of a full obstacle
-    max_occupancy: float = 0.5  # the level at radius + margin from a surface; never entered
-    goal_tolerance: float = 0.15
-    directions: int = 12
-    max_steps: int = 2000
-    stuck_window: int = 80  # steps without progress towards the goal before giving up
+    robot_radius: float = 0.2  #: Robot radius (m)
+    margin: float = 0.05  #: Clearance (m) beyond the radius (A* baseline inflates one 5 cm cell)
+    z_band: tuple[float, float] = (0.05, 1.2)  #: Heights the robot's body occupies
+    step: float = 0.1  #: Metres per step
+    g_thr: float = 1.5  #: Directional gradient threshold (occupancy per metre)
+    min_support: float = 0.05  #: Density, relative to the map's median, of a full obstacle
+    max_occupancy: float = 0.5  #: The level at radius + margin from a surface; never entered
+    goal_tolerance: float = 0.15  #: Distance (m) from the goal that counts as arrived
+    directions: int = 12  #: Headings tried around the goal's direction (12: every 30°)
+    max_steps: int = 2000  #: Steps before giving up
+    stuck_window: int = 80  #: Steps without progress towards the goal before giving up
 
     def __post_init__(self) -> None:
         if not (self.robot_radius > 0 and self.step > 0 and self.goal_tolerance > 0):
@@ -396,21 +399,21 @@ class SimOptions:
     move in step as in the field, however fast each maps (rendezvous links need it).
     """
 
-    world: str = "office"  # a built-in world, random-office:<seed> or a world .json file
-    robots: int = 3
-    seed: int = 0  # sensor noise and odometry
-    sensor: str = "lidar"
-    width: int = 320
-    beams: int = 16
-    lidar_fov: float = 15.0  # ± degrees of elevation
-    lidar_range: float = 30.0
-    sway: float = 0.0  # degrees of roll and pitch
-    noise: bool = True
-    rate: float = 5.0  # frames per second
-    speed: float = 0.5  # m/s
-    drift: float = 0.02
-    pace: float | None = None
-    start: float | None = None
+    world: str = "office"  #: A built-in world, `random-office:<seed>` or a world .json file
+    robots: int = 3  #: Simulated robots
+    seed: int = 0  #: Seed of the sensor noise and the odometry
+    sensor: str = "lidar"  #: lidar (360° LiDAR) or depth (60° depth camera)
+    width: int = 320  #: Depth camera image width (px, 4:3)
+    beams: int = 16  #: LiDAR channels over ±lidar_fov of elevation
+    lidar_fov: float = 15.0  #: LiDAR elevation field, ± degrees
+    lidar_range: float = 30.0  #: LiDAR maximum range (m)
+    sway: float = 0.0  #: Carrier roll and pitch, up to ± degrees (handheld, legged; 0: flat floor)
+    noise: bool = True  #: Sensor noise (depth or range)
+    rate: float = 5.0  #: Frames per second
+    speed: float = 0.5  #: Driving speed (m/s)
+    drift: float = 0.02  #: Simulated odometry error per metre driven (and rad per rad turned)
+    pace: float | None = None  #: Frames due at this many times the rate; null: as fast as mapped
+    start: float | None = None  #: Unix time paced frames count from; null: when the robot starts
 
     def __post_init__(self) -> None:
         if self.pace is not None and not (math.isfinite(self.pace) and self.pace > 0):
@@ -448,22 +451,24 @@ class RosOptions:
     ``status_topic``. Live over ROS 1 (``gmmap robot --ros1``, `gmmap.io.ros1bridge`): the same
     topics, frames and outputs, through the ROS master."""
 
-    cloud_topic: str | None = None
-    odom_topic: str | None = None
-    tf_parent: str | None = None
-    tf_child: str | None = None
+    cloud_topic: str | None = None  #: The PointCloud2 topic; null: a bag's only one (live: /points)
+    odom_topic: str | None = None  #: Odometry or pose topic; null: a bag's only one (live: /odom)
+    tf_parent: str | None = None  #: Poses from /tf: the chain from this frame (odom or map) down
+    tf_child: str | None = None  #: ... to this frame; null: the clouds' frame
+    #: The sensor in that frame, 4×4 rows; null: identity
     extrinsic: tuple[tuple[float, ...], ...] | None = None
-    depth_topic: str | None = None
-    camera_info_topic: str | None = None
-    depth_stride: int = 4
-    key_format: str = "rmw_zenoh"
-    distro: str = "jazzy"
-    domain_id: int = 0
+    depth_topic: str | None = None  #: Live: depth images (16UC1, 32FC1) on this topic, not clouds
+    camera_info_topic: str | None = None  #: Depth intrinsics; null: camera_info beside depth_topic
+    depth_stride: int = 4  #: Live: every this-many-th pixel of a depth image is used
+    key_format: str = "rmw_zenoh"  #: ROS 2: rmw_zenoh keys, or bridge (zenoh-bridge-ros2dds)
+    distro: str = "jazzy"  #: Live over ROS 2 with rmw_zenoh: the distro whose type hashes are used
+    domain_id: int = 0  #: Live over ROS 2 with rmw_zenoh: the ROS domain id
+    #: Live over ROS 2: Zenoh endpoints to connect to (rmw_zenoh's router)
     connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
-    map_topic: str = "/gmmap/map"
-    points_topic: str = "/gmmap/map_points"
-    status_topic: str = "/gmmap/status"
-    publish_every_s: float = 2.0
+    map_topic: str = "/gmmap/map"  #: Out: the merged map, a MarkerArray of ellipsoids
+    points_topic: str = "/gmmap/map_points"  #: Out: a PointCloud2 sampled from the merged map
+    status_topic: str = "/gmmap/status"  #: Out: a JSON status
+    publish_every_s: float = 2.0  #: Seconds between outputs
 
     def __post_init__(self) -> None:
         if self.extrinsic is not None:
