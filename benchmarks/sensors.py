@@ -1,0 +1,131 @@
+"""The sensor matrix: does the front end join maps on every sensor, and never wrongly?
+
+Prints one JSON object. Per simulated setup (the office, drifting odometry, the defaults) and
+seed, and per real cross-session case, through `gmmap.eval.sessions.evaluate_sessions`:
+
+- ``pairs`` (robot pairs), ``met`` (robot pairs with at least one overlapping submap pair at
+  the truth: `gmmap.eval.place.positives`), ``joined`` (met pairs whose map frames are within
+  0.5 m and 5° where they met) and ``wrong`` (joined pairs farther off): a wrong join is
+  worse than none;
+- ``verified``, ``precision`` and ``recall`` of the verified matches (`evaluate_sessions`),
+  beside the points + GICP verification on the same candidates (``gicp``: candidates it
+  registers right; its recall at full precision scored by its inlier fraction);
+- ``bytes_median`` per submap on the wire (`gmmap.encode`), ``eval_time_per_candidate_s``
+  (the whole evaluation per candidate: the merge, the GICP baseline and the floor).
+
+Setups: ``lidar16`` (16 beams over ±15°, 5 Hz, a wheeled robot), ``lidar360_2hz`` and
+``lidar360_10hz`` (32 beams over ±45°, 10° of roll and pitch: a handheld 360° LiDAR),
+``depth`` (the 60° depth camera, 320 px, 5 Hz). Real: TUM fr1_xyz's first 400 frames against
+the recording re-sampled at 10 Hz from frame 201 (`benchmarks/merge.py`'s case). Building the
+submaps and the baselines dominate the time: 1-4 minutes per 3-robot case on 2 cores (22
+minutes for the defaults), so `make bench` leaves this one out.
+
+    .venv/bin/python benchmarks/sensors.py [--seeds 3] [--robots 3] [--setups lidar16,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gmmap import encode
+from gmmap.config import Config
+from gmmap.eval.sessions import evaluate_sessions
+from gmmap.io import datasets
+from gmmap.io.sim import simulate_options
+from gmmap.mapping.submap import build_submaps
+from gmmap.options import SimOptions
+
+DATA = Path(
+    os.environ.get("GMMAP_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
+)
+HANDHELD = {"beams": 32, "lidar_fov": 45.0, "sway": 10.0}
+SETUPS = {
+    "lidar16": {"sensor": "lidar"},
+    "lidar360_2hz": {"sensor": "lidar", "rate": 2.0, **HANDHELD},
+    "lidar360_10hz": {"sensor": "lidar", "rate": 10.0, **HANDHELD},
+    "depth": {"sensor": "depth"},
+}
+WRONG = (0.5, 5.0)  # m, degrees: a joined pair's frame error beyond this is a wrong join
+
+
+def case(sessions: dict, config: Config) -> dict:
+    start = time.perf_counter()
+    r = evaluate_sessions(sessions, config)
+    elapsed = time.perf_counter() - start
+    robots = sorted(sessions)
+    met = r["positives_by_robots"]
+    joined = [p for p in r["merge"].get("pairs", []) if p["frame_t_error"] is not None]
+    wrong = [p for p in joined if p["t_error"] is None or p["t_error"] > WRONG[0]
+             or p["r_error_deg"] > WRONG[1]]  # fmt: skip
+    sizes = [len(encode(s)) for subs in sessions.values() for s in subs]
+    return {
+        "submaps": {name: len(subs) for name, subs in sessions.items()},
+        "pairs": len(robots) * (len(robots) - 1) // 2,
+        "met": len(met),
+        "joined": len(joined) - len(wrong),
+        "wrong": len(wrong),
+        **{k: r[k] for k in ("positives", "candidates", "verified", "precision", "recall")},
+        "gicp": r["gicp"],
+        "bytes_median": float(np.median(sizes)),
+        "eval_time_per_candidate_s": elapsed / max(1, r["candidates"]),
+    }
+
+
+def simulated(setup: str, robots: int, seed: int, config: Config) -> dict:
+    options = SimOptions(robots=robots, seed=seed, **SETUPS[setup])
+    run = simulate_options(options)
+    sessions = {r.name: list(build_submaps(r, r.name, config.build, config.select)) for r in run}
+    return case(sessions, config)
+
+
+def real(config: Config) -> dict:
+    fr1 = DATA / "tum_fr1_xyz"
+    if not fr1.exists():
+        return {"skipped": f"{fr1} not found"}
+    frames = datasets.open(fr1)
+    second = [frames[i] for i in range(201, len(frames), 3)]
+    sessions = {
+        name: list(build_submaps(part, name, config.build, config.select))
+        for name, part in (("a", frames[0:400]), ("b", second))
+    }
+    return {"tum_fr1_xyz_second_session_10hz": case(sessions, config)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--robots", default="3")
+    parser.add_argument("--setups", default=",".join(SETUPS))
+    args = parser.parse_args()
+    config = Config()
+    out: dict = {}
+    for setup in args.setups.split(","):
+        for robots in (int(n) for n in args.robots.split(",")):
+            runs = []
+            for seed in range(args.seeds):
+                print(f"{setup}, {robots} robots, seed {seed}", file=sys.stderr, flush=True)
+                runs.append(simulated(setup, robots, seed, config))
+            out[f"{setup}_{robots}_robots"] = {**totals(runs), "seeds": args.seeds, "runs": runs}
+    print("real cross-session cases", file=sys.stderr, flush=True)
+    out["real"] = real(config)
+    print(json.dumps(out, indent=1))
+
+
+def totals(runs: list[dict]) -> dict:
+    """Sums over the seeds, and the verified precision over all of them."""
+    total = {k: sum(r[k] for r in runs) for k in ("pairs", "met", "joined", "wrong", "verified")}
+    right = sum(round((r["precision"] or 0) * r["verified"]) for r in runs)
+    total["precision"] = right / total["verified"] if total["verified"] else None
+    total["bytes_median"] = float(np.median([r["bytes_median"] for r in runs]))
+    return total
+
+
+if __name__ == "__main__":
+    main()
