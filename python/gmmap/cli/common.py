@@ -156,6 +156,16 @@ SIM_SETTINGS = (
         type=click.Choice(SENSORS),
     ),
     setting("--sim-width", "sim.width", "Depth camera image width (px, 4:3).", type=int),
+    setting("--rate", "sim.rate", "Frames per second.", type=float),
+    setting("--speed", "sim.speed", "Driving speed (m/s).", type=float),
+    setting(
+        "--beams",
+        "sim.beams",
+        "LiDAR channels over ±lidar-fov of elevation.",
+        type=click.IntRange(1),
+    ),
+    setting("--lidar-fov", "sim.lidar_fov", "LiDAR elevation field, ± degrees.", type=float),
+    setting("--sway", "sim.sway", "Carrier roll and pitch, ± degrees (handheld).", type=float),
     setting("--sim-drift", "sim.drift", "Simulated odometry error per metre.", type=float),
     setting(
         "--sim-pace",

@@ -210,7 +210,7 @@ def eval_place(
         place_set = place.split_place_set(frames, frames_per_submap, log, b.covariance)
     else:
         place_set = place.sim_place_set(
-            s.world, s.robots, s.seed, frames_per_submap, log, s.sensor, b.covariance
+            s.world, s.robots, s.seed, frames_per_submap, log, s.sensor, b.covariance, s
         )
     r = place.evaluate_place(place_set, config.place, progress=log, gicp=not no_gicp)
     if plots:

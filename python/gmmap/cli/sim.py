@@ -23,14 +23,7 @@ from gmmap.config import Config
     "world.json, sim.json, config.yaml.",
 )
 @click.option("--max-frames", type=int, help="Keep only each robot's first frames.")
-@setting("--rate", "sim.rate", "Frames per second.", type=float)
-@setting("--speed", "sim.speed", "Driving speed (m/s).", type=float)
-@setting("--beams", "sim.beams", "LiDAR channels over ±lidar-fov of elevation.",
-         type=click.IntRange(1))  # fmt: skip
-@setting("--lidar-fov", "sim.lidar_fov", "LiDAR elevation field, ± degrees.", type=float)
 @setting("--lidar-range", "sim.lidar_range", "LiDAR maximum range (m).", type=float)
-@setting("--sway", "sim.sway", "Carrier roll and pitch, ± degrees (handheld, legged).",
-         type=float)  # fmt: skip
 @setting("--noise/--no-noise", "sim.noise", "Sensor noise (depth or range).")
 @config_option
 @as_json_option

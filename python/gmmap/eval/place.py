@@ -22,7 +22,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from gmmap.eval.registration import pose_errors
 from gmmap.mapping.place import PlaceDatabase, PlaceOptions, descriptor_for
 from gmmap.mapping.submap import BuildOptions, Submap, build_submaps
 from gmmap.math.geometry import invert
+from gmmap.options import SimOptions
 
 CORRECT_M, CORRECT_DEG = 0.2, 3.0
 RECALL_N = 25
@@ -256,17 +257,18 @@ def sim_place_set(
     progress: Progress | None = None,
     sensor: str = "lidar",
     covariance: str = "full",
+    sim: SimOptions | None = None,
 ) -> PlaceSet:
     """Simulated robots with drifting odometry, their submaps and the positives; ``sensor``
-    "lidar" (the default 360° LiDAR) or "depth" (the default depth camera)."""
-    from gmmap.io.sim import UP, get_world, sim_sensor, simulate
+    "lidar" (the default 360° LiDAR) or "depth" (the default depth camera). ``sim``: the
+    LiDAR's beams and field, the rate, speed and sway (its world, robots, seed and sensor are
+    the arguments'; the depth camera is always the harness's 640 px one)."""
+    from gmmap.io.sim import UP, Motion, get_world, sim_sensor, simulate
     from gmmap.math.drift import Drift
-    from gmmap.options import SimOptions
 
-    device = sim_sensor(SimOptions(sensor=sensor, width=640))  # the harness's 640 px camera
-    run = simulate(
-        get_world(world), robots=robots, seed=seed, sensor=device, odometry=Drift(seed=seed, up=UP)
-    )
+    o = replace(sim or SimOptions(), sensor=sensor, width=640)  # the harness's 640 px camera
+    motion = Motion(speed=o.speed, rate=o.rate, sway=o.sway)
+    run = simulate(get_world(world), robots, seed, sim_sensor(o), motion, Drift(seed=seed, up=UP))
     submaps = []
     for r in run:
         if progress:
