@@ -2,7 +2,10 @@
 
 Each script benchmarks/<name>.py prints one JSON object, which ``make bench`` saves as
 bench-<name>.json in the repository root. This script reads every such file that exists and
-writes one section per benchmark: a sentence on what it measures and against which baseline,
+writes the page: first a scoreboard, one row per headline figure against its baseline
+(``SCOREBOARD``; a row whose file or keys are missing says "not run"), then the key plots
+(``benchmarks/plots.py``, PNGs beside the page, when matplotlib is importable), then one
+section per benchmark: a sentence on what it measures and against which baseline,
 then its figures. The figures are the JSON walked generically:
 
 - an object's scalars (and lists of scalars) form a two-column table, figure and value;
@@ -15,19 +18,23 @@ Floats are rounded to 4 significant digits. Integers, which are counts, stay exa
 more than 25 values are shortened (the JSON files have them all). Benchmarks without a
 readable JSON file are listed as not run, each with the command that runs it.
 
-    python benchmarks/report.py [--root DIR] [--out FILE|-]
+    python benchmarks/report.py [--root DIR] [--out FILE|-] [--no-plots]
 
-Python 3.10+, standard library only. It imports nothing of gmmap, so it runs anywhere.
+Python 3.10+, standard library only (matplotlib for the plots, skipped without it). It imports
+nothing of gmmap, so it runs anywhere.
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import importlib.util
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,6 +96,162 @@ ORDER = tuple(DESCRIPTIONS)
 MAX_LIST = 25  # longer lists of scalars are shortened in the page (the JSON has them all)
 MAX_COLUMNS = 14  # a table gets at most this many value columns
 MAX_LEVEL = 6  # deepest Markdown heading; deeper objects get a bold title
+
+Key = str | int  # an object's key; a list's index, or "name=value" for its item with that figure
+
+
+@dataclass(frozen=True)
+class Row:
+    """One scoreboard row: a headline figure of gmmap against its baseline, both read from
+    bench-<bench>.json by a path of keys (``also``: more of gmmap's figures shown beside its
+    value, e.g. wrong joins), or the baseline a published constant."""
+
+    figure: str
+    bench: str
+    gmmap: tuple[Key, ...]
+    baseline: str
+    base: tuple[Key, ...] | float
+    data: str
+    real: bool
+    lower_is_better: bool = False
+    unit: str = ""
+    scale: float = 1.0  # shown value = JSON value × scale (e.g. m to mm); ratios unchanged
+    also: tuple[tuple[str, tuple[Key, ...]], ...] = ()
+
+
+def _registration(data: str, key: str, real: bool = True) -> tuple[Row, Row]:
+    """Mean translation error and time per pair of Point-to-GMM registration against GICP."""
+    m = (key, "methods")
+    return (
+        Row(
+            "Registration, mean translation error",
+            "registration",
+            (*m, "points", "t_error_mean"),
+            "small_gicp GICP on the points",
+            (*m, "gicp", "t_error_mean"),
+            data,
+            real,
+            lower_is_better=True,
+            unit=" mm",
+            scale=1000.0,
+        ),
+        Row(
+            "Registration, time per pair",
+            "registration",
+            (*m, "points", "time_per_pair_s"),
+            "small_gicp GICP on the points",
+            (*m, "gicp", "time_per_pair_s"),
+            data,
+            real,
+            lower_is_better=True,
+            unit=" ms",
+            scale=1000.0,
+        ),
+    )
+
+
+def _sensors(setup: tuple[str, ...], data: str, real: bool = False) -> Row:
+    """Robot pairs whose maps were joined (and joined wrongly) of the pairs that met."""
+    return Row(
+        "Robot pairs joined, of those that met",
+        "sensors",
+        (*setup, "joined"),
+        "pairs that met",
+        (*setup, "met"),
+        data,
+        real,
+        also=(("wrong", (*setup, "wrong")),),
+    )
+
+
+# The headline figures, in page order.
+SCOREBOARD: tuple[Row, ...] = (
+    Row(
+        "EM fit time (K = 100, 30 iterations)",
+        "em",
+        ("gmmap", "time_s"),
+        "scikit-learn GaussianMixture",
+        ("sklearn", "time_s"),
+        "TUM fr1_xyz, 50,000 voxelised points",
+        True,
+        lower_is_better=True,
+        unit=" s",
+    ),
+    *_registration("TUM fr1_xyz, consecutive 5-frame submaps", "tum_fr1_xyz"),
+    *_registration("KITTI 00, consecutive scans", "kitti_00"),
+    Row(
+        "Bytes per encoded submap",
+        "codec",
+        ("size", "bytes_mean"),
+        "voxelised points as float32",
+        ("size", "float32_points_bytes_mean"),
+        "TUM fr1_xyz, 5-frame submaps",
+        True,
+        lower_is_better=True,
+        unit=" B",
+    ),
+    Row(
+        "Bytes per encoded submap",
+        "codec",
+        ("size", "bytes_mean"),
+        "the paper's message",
+        5099.0,
+        "TUM fr1_xyz, 5-frame submaps",
+        True,
+        lower_is_better=True,
+        unit=" B",
+    ),
+    Row(
+        "Place recall@1, shape descriptor on GMMs",
+        "place",
+        ("held_out_sim_pooled", "shape", "recall_at_1", "gmm"),
+        "the same descriptor on raw points",
+        ("held_out_sim_pooled", "shape", "recall_at_1", "points"),
+        "held-out worlds pooled (LiDAR and depth)",
+        False,
+    ),
+    Row(
+        "Place recall at 100 % precision, verified",
+        "place",
+        ("tum_fr1_xyz_halves", "shape", "verified_at_full_precision", "gmm"),
+        "points + small_gicp GICP",
+        ("tum_fr1_xyz_halves", "shape", "verified_at_full_precision", "points_gicp"),
+        "TUM fr1_xyz split into two robots",
+        True,
+    ),
+    Row(
+        "Planner: one GMM step against one A* plan",
+        "planner",
+        ("scenes", "clutter", "gmm_time_per_step_s"),
+        "A* on a 5 cm grid",
+        ("scenes", "clutter", "astar_plan_s"),
+        "the paper's clutter scene",
+        False,
+        lower_is_better=True,
+        unit=" ms",
+        scale=1000.0,
+    ),
+    Row(
+        "Bytes sent per robot, 8-robot fleet",
+        "fleet",
+        ("fleets", "robots=8", "bytes_sent", "mean"),
+        "voxelised points as float32",
+        ("fleets", "robots=8", "points_float32_sent_equivalent"),
+        "the demo office, 8 robots",
+        False,
+        lower_is_better=True,
+        unit=" B",
+    ),
+    _sensors(("lidar16_3_robots",), "office, 16-beam LiDAR, 3 robots × seeds"),
+    _sensors(("lidar360_2hz_3_robots",), "office, handheld 360° LiDAR 2 Hz, 3 robots × seeds"),
+    _sensors(("lidar360_10hz_3_robots",), "office, handheld 360° LiDAR 10 Hz, 3 robots × seeds"),
+    _sensors(("depth_3_robots",), "office, depth camera, 3 robots × seeds"),
+    _sensors(
+        ("real", "tum_fr1_xyz_second_session_10hz"),
+        "TUM fr1_xyz, two sessions (the second at 10 Hz)",
+        real=True,
+    ),
+)
 
 
 def fmt(value: Any) -> str:
@@ -347,8 +510,134 @@ def not_run(missing: list[tuple[str, str]], total: int) -> list[str]:
     return lines
 
 
-def page(root: Path) -> tuple[str, int, int]:
-    """The whole page, how many benchmarks it has figures for, and how many there are."""
+def lookup(data: Any, path: tuple[Key, ...]) -> Any:
+    """The value at ``path`` in ``data``, or None when a key is missing. In a list, an int is
+    an index and "name=value" the first item whose figure ``name`` reads ``value``."""
+    for key in path:
+        if isinstance(data, dict) and isinstance(key, str):
+            data = data.get(key)
+        elif isinstance(data, list) and isinstance(key, int):
+            data = data[key] if -len(data) <= key < len(data) else None
+        elif isinstance(data, list) and isinstance(key, str) and "=" in key:
+            name, _, want = key.partition("=")
+            found = (v for v in data if isinstance(v, dict) and fmt(v.get(name)) == want)
+            data = next(found, None)
+        else:
+            return None
+        if data is None:
+            return None
+    return data
+
+
+def number(value: Any) -> float | None:
+    """A finite JSON number as a float, else None (booleans are not numbers here)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def ratio(row: Row, ours: float, base: float) -> str:
+    """gmmap ÷ baseline, or baseline ÷ gmmap where lower is better: above 1, gmmap is ahead."""
+    top, bottom = (base, ours) if row.lower_is_better else (ours, base)
+    if bottom == 0:
+        return "–"
+    which = "baseline / gmmap" if row.lower_is_better else "gmmap / baseline"
+    return f"{fmt(top / bottom)} ({which})"
+
+
+def score(row: Row, benches: dict[str, dict[str, Any]]) -> list[str]:
+    """The row's cells: figure, gmmap, baseline, ratio, data, real or simulated."""
+    data = benches.get(row.bench)
+    ours = None if data is None else number(lookup(data, row.gmmap))
+    if isinstance(row.base, tuple):
+        base = None if data is None else number(lookup(data, row.base))
+    else:
+        base = number(row.base)
+    also = [(name, None if data is None else number(lookup(data, p))) for name, p in row.also]
+    figure = f"{row.figure} ([{row.bench}](#{row.bench}))"
+    kind = "real" if row.real else "simulated"
+    if ours is None or base is None or any(v is None for _, v in also):
+        return [figure, "not run", row.baseline, "–", row.data, kind]
+    shown = fmt(ours * row.scale) + row.unit
+    if also:
+        shown += " (" + ", ".join(f"{name} {fmt(v)}" for name, v in also) + ")"
+    baseline = f"{row.baseline}: {fmt(base * row.scale)}{row.unit}"
+    return [figure, shown, baseline, ratio(row, ours, base), row.data, kind]
+
+
+def scoreboard(benches: dict[str, dict[str, Any]], rows: tuple[Row, ...] = SCOREBOARD) -> list[str]:
+    """The page's opening table: a row per headline figure, "not run" where its JSON is not
+    there, then where each figure is read from."""
+    lines = [
+        "## Scoreboard",
+        "",
+        "One row per headline figure, gmmap against the baseline measured in the same run. The "
+        "ratio is gmmap / baseline, or baseline / gmmap where lower is better, so above 1 means "
+        "gmmap is ahead; for the robot pairs joined it is the share of the pairs that met. Real "
+        "data: TUM RGB-D and KITTI recordings; simulated: gmmap's simulator. Each benchmark's "
+        "name links to its section.",
+        "",
+        "| figure | gmmap | baseline | ratio | data | real or simulated |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in score(row, benches)) + " |")
+    lines += ["", "<details><summary>Where each figure is read from</summary>", ""]
+    for row in rows:
+        base = code(dotted(row.base)) if isinstance(row.base, tuple) else f"{fmt(row.base)}"
+        lines.append(
+            f"- {row.figure}, against {row.baseline}: `bench-{row.bench}.json` "
+            f"{code(dotted(row.gmmap))}, baseline {base}"
+        )
+    return [*lines, "", "</details>", ""]
+
+
+def dotted(path: tuple[Key, ...]) -> str:
+    """A key path as page text."""
+    return "".join(
+        f"[{k}]" if isinstance(k, int) or "=" in k else f".{k}" if i else k
+        for i, k in enumerate(path)
+    )
+
+
+def plot_module() -> Any:
+    """benchmarks/plots.py loaded, or None (and why, on stderr) when matplotlib is missing."""
+    path = ROOT / "benchmarks" / "plots.py"
+    if importlib.util.find_spec("matplotlib") is None or not path.exists():
+        print("matplotlib is not importable: the page has no plots", file=sys.stderr)
+        return None
+    spec = importlib.util.spec_from_file_location("gmmap_bench_plots", path)
+    if spec is None or spec.loader is None:
+        return None
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except ImportError as e:
+        print(f"plots skipped ({e})", file=sys.stderr)
+        return None
+    return module
+
+
+def plot_section(benches: dict[str, dict[str, Any]], folder: Path, page_dir: Path) -> list[str]:
+    """The key plots as PNGs in ``folder``, linked from a page in ``page_dir``; none (and no
+    section) without matplotlib or without the JSON they need."""
+    module = plot_module()
+    made = [] if module is None else module.plots(benches, folder)
+    if not made:
+        return []
+    lines = ["## Plots", ""]
+    for title, png in made:
+        link = Path(os.path.relpath(png, page_dir)).as_posix()
+        lines += [f"![{title}]({link})", "", f"*{title}*", ""]
+    return lines
+
+
+def page(
+    root: Path, plots: Path | None = None, page_dir: Path | None = None
+) -> tuple[str, int, int]:
+    """The whole page, how many benchmarks it has figures for, and how many there are. With
+    ``plots``, the key plots are written there as PNGs and linked from a page in ``page_dir``
+    (default: the folder above ``plots``)."""
     every = names(root)
     lines = [
         "# Benchmarks",
@@ -360,8 +649,8 @@ def page(root: Path) -> tuple[str, int, int]:
         "the full figures.",
         "",
     ]
+    benches: dict[str, dict[str, Any]] = {}
     missing: list[tuple[str, str]] = []
-    present = 0
     for name in every:
         path = root / f"bench-{name}.json"
         if not path.exists():
@@ -371,11 +660,15 @@ def page(root: Path) -> tuple[str, int, int]:
         if data is None:
             missing.append((name, error or "unreadable"))
             continue
+        benches[name] = data
+    lines += scoreboard(benches)
+    if plots is not None:
+        lines += plot_section(benches, plots, page_dir or plots.parent)
+    for name, data in benches.items():
         lines += section(name, data)
-        present += 1
     if missing:
         lines += not_run(missing, len(every))
-    return "\n".join(lines).rstrip() + "\n", present, len(every)
+    return "\n".join(lines).rstrip() + "\n", len(benches), len(every)
 
 
 def main() -> None:
@@ -384,12 +677,17 @@ def main() -> None:
     parser.add_argument(
         "--out", default=str(ROOT / "docs" / "benchmarks.md"), help="the page ('-': stdout)"
     )
+    parser.add_argument(
+        "--no-plots", action="store_true", help="no PNGs (written beside the page otherwise)"
+    )
     args = parser.parse_args()
-    text, present, total = page(args.root)
     if args.out == "-":
-        sys.stdout.write(text)
+        sys.stdout.write(page(args.root)[0])
         return
     out = Path(args.out)
+    # docs/benchmarks.md's plots go in docs/benchmarks/.
+    plots = None if args.no_plots else out.parent / out.stem
+    text, present, total = page(args.root, plots, out.parent)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     print(f"wrote {out}: {present} of {total} benchmarks", file=sys.stderr)
