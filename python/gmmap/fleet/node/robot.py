@@ -38,6 +38,7 @@ the store, so a restart recovers it), joins the stages, and closes the transport
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import tempfile
@@ -72,7 +73,7 @@ __all__ = ["Arrived", "Built", "RobotNode"]
 log = logging.getLogger(__name__)
 
 META_FRAMES = "frames_consumed"
-META_CARRIED = "motion_carried"  # the builder's travelled and turned after its last submap
+META_CARRIED = "builder_state"  # `SubmapBuilder.state` after the robot's last submap
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
@@ -250,9 +251,9 @@ class RobotNode(Fetching, Lingering):
             builder.seq = 0 if last is None else last + 1
             i = self.frames_consumed
             live = isinstance(frames, LiveInput)
-            if i > 0 and not live:
-                carried = self.store.get_meta(META_CARRIED, "0 0") or "0 0"
-                builder.resume(frames[i - 1].pose, *map(float, carried.split()))
+            carried = self.store.get_meta(META_CARRIED, "")
+            if carried:
+                builder.resume(json.loads(carried))
             for frame in iter(frames) if live else (frames[j] for j in range(i, len(frames))):
                 if self.stopping:
                     break
@@ -269,8 +270,7 @@ class RobotNode(Fetching, Lingering):
 
     def _emit(self, s: Submap, consumed: int, builder: SubmapBuilder) -> None:
         payload = self.door.seal(self.robot, KIND, s.seq, encode(s))
-        carried = f"{builder.travelled!r} {builder.turned!r}"
-        meta = {META_FRAMES: str(consumed), META_CARRIED: carried}
+        meta = {META_FRAMES: str(consumed), META_CARRIED: json.dumps(builder.state())}
         self.store.put_submap(self.robot, s.seq, payload, own=True, meta=meta)
         self.frames_consumed = consumed
         self.counts["built"] += 1
