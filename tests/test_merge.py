@@ -10,7 +10,7 @@ from conftest import BUNDLED_TUM_SLICE
 from gmmap.cli import main
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
-from gmmap.eval.merge import merge
+from gmmap.eval.merge import ate, merge
 from gmmap.io.datasets.tum import TumRgbd
 from gmmap.mapping.backend import BackendOptions
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
@@ -252,3 +252,11 @@ def test_fr3_cabinet_loop_verifies_no_wrong_match(shared_data):
     r = evaluate_sessions(sessions, config, gicp=False)
     assert r["candidates"] >= 10 and r["precision"] in (None, 1.0), r
     assert not r["joined"] or r["frame_t_error"] < 0.1, r
+
+
+def test_the_aligned_ate_of_anchors_in_a_line_is_none_not_a_crash():
+    """A short recording's few submaps can have anchors in a line: no rigid fit exists."""
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[:, 0, 3] = [0.0, 1.0, 2.0]
+    assert ate(poses, poses, align=True) is None
+    assert ate(poses, poses) == 0.0

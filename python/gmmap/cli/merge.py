@@ -140,13 +140,19 @@ def describe(report: dict, robots: int) -> str:
         )
     lines += [f"error {describe_pair(p)}" for p in report.get("pairs", [])]
     if "ate_before_m" in report:
+        ate = {k: _metres(report[f"ate_{k}_m"]) for k in ("before", "after", "aligned_before",
+                                                          "aligned_after")}  # fmt: skip
         lines.append(
-            f"ATE of the anchors: {report['ate_before_m']:.3f} m before, "
-            f"{report['ate_after_m']:.3f} m after optimisation; rigidly aligned "
-            f"{report['ate_aligned_before_m']:.3f} m and {report['ate_aligned_after_m']:.3f} m"
+            f"ATE of the anchors: {ate['before']} before, {ate['after']} after optimisation; "
+            f"rigidly aligned {ate['aligned_before']} and {ate['aligned_after']}"
         )
     lines += describe_match_errors(report.get("match_errors", {}))
     if "injected_wrong" in report:
         w = report["injected_wrong"]
         lines.append(f"injected wrong matches: {w['rejected']} of {w['n']} rejected")
     return "\n".join(lines)
+
+
+def _metres(value: float | None) -> str:
+    """A distance to the millimetre, or why there is none (too few anchors to align)."""
+    return "–" if value is None else f"{value:.3f} m"

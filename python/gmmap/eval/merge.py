@@ -135,16 +135,21 @@ def truth_errors(submaps: Submaps, b: BackendResult) -> dict:
     }
 
 
-def ate(estimate: np.ndarray, truth: np.ndarray, align: bool = False) -> float:
+def ate(estimate: np.ndarray, truth: np.ndarray, align: bool = False) -> float | None:
     """RMSE of anchor positions (evo's APE, translation part). Both are in the reference frame;
     ``align`` first fits the estimate to the truth by one rigid motion (evo's ``--align``), which
-    takes out where the reference robot's own drift put the whole map."""
+    takes out where the reference robot's own drift put the whole map; None when the anchors
+    are too few or too nearly in line for that fit (a short recording's few submaps)."""
     from evo.core import metrics
+    from evo.core.geometry import GeometryException
     from evo.core.trajectory import PosePath3D
 
     reference, moved = PosePath3D(poses_se3=list(truth)), PosePath3D(poses_se3=list(estimate))
     if align:
-        moved.align(reference)
+        try:
+            moved.align(reference)
+        except GeometryException:
+            return None
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((reference, moved))
     return float(ape.get_statistic(metrics.StatisticsType.rmse))
