@@ -10,7 +10,8 @@ seed, and per real cross-session case, through `gmmap.eval.sessions.evaluate_ses
 - ``verified``, ``precision`` and ``recall`` of the verified matches (`evaluate_sessions`),
   beside the points + GICP verification on the same candidates (``gicp``: candidates it
   registers right; its recall at full precision scored by its inlier fraction);
-- ``bytes_median`` per submap on the wire (`gmmap.encode`), ``eval_time_per_candidate_s``
+- ``bytes_median`` per submap on the wire (`gmmap.encode`), ``bytes_per_metre`` of odometry
+  path (all robots' submaps over all robots' paths), ``eval_time_per_candidate_s``
   (the whole evaluation per candidate: the merge, the GICP baseline and the floor).
 
 Setups: ``lidar16`` (16 beams over ±15°, 5 Hz, a wheeled robot), ``lidar360_2hz`` and
@@ -55,7 +56,12 @@ SETUPS = {
 WRONG = (0.5, 5.0)  # m, degrees: a joined pair's frame error beyond this is a wrong join
 
 
-def case(sessions: dict, config: Config) -> dict:
+def path_length(poses: np.ndarray) -> float:
+    """Metres of path through (M, 4, 4) poses."""
+    return float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
+
+
+def case(sessions: dict, config: Config, metres: float) -> dict:
     start = time.perf_counter()
     r = evaluate_sessions(sessions, config)
     elapsed = time.perf_counter() - start
@@ -74,6 +80,7 @@ def case(sessions: dict, config: Config) -> dict:
         **{k: r[k] for k in ("positives", "candidates", "verified", "precision", "recall")},
         "gicp": r["gicp"],
         "bytes_median": float(np.median(sizes)),
+        "bytes_per_metre": sum(sizes) / metres,
         "eval_time_per_candidate_s": elapsed / max(1, r["candidates"]),
     }
 
@@ -82,7 +89,7 @@ def simulated(setup: str, robots: int, seed: int, config: Config) -> dict:
     options = SimOptions(robots=robots, seed=seed, **SETUPS[setup])
     run = simulate_options(options)
     sessions = {r.name: list(build_submaps(r, r.name, config.build, config.select)) for r in run}
-    return case(sessions, config)
+    return case(sessions, config, sum(path_length(r.odom_poses) for r in run))
 
 
 def real(config: Config) -> dict:
@@ -91,11 +98,13 @@ def real(config: Config) -> dict:
         return {"skipped": f"{fr1} not found"}
     frames = datasets.open(fr1)
     second = [frames[i] for i in range(201, len(frames), 3)]
+    parts = {"a": frames[0:400], "b": second}
     sessions = {
         name: list(build_submaps(part, name, config.build, config.select))
-        for name, part in (("a", frames[0:400]), ("b", second))
+        for name, part in parts.items()
     }
-    return {"tum_fr1_xyz_second_session_10hz": case(sessions, config)}
+    metres = sum(path_length(np.array([f.pose for f in part])) for part in parts.values())
+    return {"tum_fr1_xyz_second_session_10hz": case(sessions, config, metres)}
 
 
 def main() -> None:
@@ -124,6 +133,7 @@ def totals(runs: list[dict]) -> dict:
     right = sum(round((r["precision"] or 0) * r["verified"]) for r in runs)
     total["precision"] = right / total["verified"] if total["verified"] else None
     total["bytes_median"] = float(np.median([r["bytes_median"] for r in runs]))
+    total["bytes_per_metre"] = float(np.median([r["bytes_per_metre"] for r in runs]))
     return total
 
 

@@ -52,16 +52,16 @@ DISTROS = ("humble", "jazzy", "kilted")
 class BuildOptions:
     """How submaps are built (`gmmap.mapping.submap`).
 
-    Submaps by space: a submap closes at the frame whose odometry is ``submap_distance`` m (in a
-    straight line) from where it began or has turned ``submap_angle``° about the vertical, and
-    ``frames_per_submap`` only caps its accepted frames. Every frame's pose counts, skipped or
-    not, and the overshoot carries over, so the same path sampled at 2, 10 or 30 Hz, even by a
-    swaying handheld sensor, closes its submaps at the same places. 2 m or 90°: 20 frames of the
-    simulated robots at 5 Hz and 0.5 m/s (the paper's simulation) while they drive, a quarter
-    turn of a spin, 4 s of a 2 Hz handheld LiDAR at walking pace and 2-3 s of TUM fr1_xyz at 30
-    Hz. Against 20 frames whatever the rate, on the simulated office (3 robots, seeds 0-2): the
-    360° LiDAR (32 beams over ±45°, 2 Hz, swaying) joins all 3 robot pairs in every seed instead
-    of 1, 0 and 0, the 16-beam LiDAR all 3 as before with more matches verified right (17-19 of
+    Submaps by space: a submap closes at the frame whose odometry has travelled
+    ``submap_distance`` m of path or turned ``submap_angle``° since the last one closed, and
+    ``frames_per_submap`` only caps its accepted frames. Every frame's motion counts, skipped or
+    not, and the overshoot carries over, so the same smooth path sampled at 2, 10 or 30 Hz
+    closes its submaps at the same places (a swaying sensor's path and turns sum to more the
+    faster they are sampled: its submaps close sooner at a higher rate). 2 m or 90°: 20 frames
+    of the simulated robots (5 Hz, 0.5 m/s) while they drive, as in the paper's simulation.
+    Against 20 frames whatever the rate, on the simulated office (3 robots, seeds 0-2): the 360°
+    LiDAR (32 beams over ±45°, 2 Hz, swaying) joins all 3 robot pairs in every seed instead of
+    1, 0 and 0, the 16-beam LiDAR all 3 as before with more matches verified right (17-19 of
     18-21), and TUM fr1_xyz against its 10 and 5 Hz second sessions joins at 0.5 cm / 0.26° and
     0.9 cm / 0.44° instead of 2.0 cm / 0.94° and 0.7 cm / 0.73°. Distance and angle 0 or null:
     by frame count alone, the paper's protocol (`by_frames`: its Table I used 5 frames, its
@@ -70,8 +70,8 @@ class BuildOptions:
     """
 
     frames_per_submap: int = 100  #: Accepted frames per submap; the most when by distance or angle
-    submap_distance: float | None = 2.0  #: Metres from its start that close a submap; 0/null: off
-    submap_angle: float | None = 90.0  #: Degrees turned about up that close one; 0/null: off
+    submap_distance: float | None = 2.0  #: Odometry path (m) that closes a submap; 0 or null: off
+    submap_angle: float | None = 90.0  #: Degrees turned that close a submap; 0 or null: off
     voxel_size: float = 0.05  #: Point-buffer voxel size (m)
     strategy: str = "points"  #: Fitting: points (one GMM), gmm-merge (one per frame) or per-frame
     n_components: int = 100  #: Components fitted per submap, before model selection

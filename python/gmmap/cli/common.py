@@ -187,13 +187,13 @@ SUBMAP_SIZE = (
     setting(
         "--submap-distance",
         "build.submap_distance",
-        "Close a submap this far (m, straight line) from its start (0: off).",
+        "Close a submap after this much odometry path (m; 0: off).",
         type=float,
     ),
     setting(
         "--submap-angle",
         "build.submap_angle",
-        "Close a submap after turning this much about the vertical (degrees; 0: off).",
+        "Close a submap after turning this much (degrees; 0: off).",
         type=float,
     ),
 )

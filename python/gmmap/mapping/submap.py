@@ -4,9 +4,8 @@ A `SubmapBuilder` (the paper's PtBuffer) moves each frame by its odometry pose i
 submap's anchor frame (the first frame's pose, turned upright when the map frame's ``up`` is
 known) and adds it to a voxel buffer (exact centroids, 5 cm by default). A frame that would add
 too few new voxels (``min_novelty``) is skipped. The submap is fitted and its components
-selected after F accepted frames or, by space, at the frame whose odometry is
-``submap_distance`` m from where the submap began or has turned ``submap_angle``° about the
-vertical (`BuildOptions`).
+selected after F accepted frames or, by space, at the frame whose odometry has travelled
+``submap_distance`` m or turned ``submap_angle``° since the submap began (`BuildOptions`).
 Strategies:
 
 - ``points`` (the paper's Point-to-GMM, default): one GMM fitted to the buffered points.
@@ -32,7 +31,6 @@ from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gmmap import _core
 from gmmap.errors import InvalidInputError
@@ -44,9 +42,6 @@ from gmmap.math.points import voxel_filter
 from gmmap.math.select import select_components
 from gmmap.options import BuildOptions, SelectOptions
 
-# Turning is counted in steps of at least this much about the vertical, so that a sensor's
-# jitter, which sums to more the faster it is sampled, adds nothing.
-STEP_DEG = 10.0
 FILE_FORMAT = "gmmap submap"
 FILE_VERSION = 1
 
@@ -105,18 +100,6 @@ class Submap:
         )
 
 
-def heading_change(a: np.ndarray, b: np.ndarray, up: np.ndarray | None) -> float:
-    """The angle (rad) rotation ``b`` is turned from rotation ``a`` about ``up`` (the twist of
-    the relative rotation about it; its whole angle without ``up``): a handheld sensor's roll
-    and pitch are not turning."""
-    x, y, z, w = Rotation.from_matrix(b @ a.T).as_quat()
-    axis = (x, y, z)
-    if up is None:
-        return float(2.0 * math.atan2(float(np.linalg.norm(axis)), abs(w)))
-    u = np.asarray(up, dtype=float) / np.linalg.norm(up)
-    return float(2.0 * math.atan2(abs(float(np.dot(axis, u))), abs(w)))
-
-
 def level(pose: np.ndarray, up: np.ndarray | None) -> np.ndarray:
     """The pose turned so its z axis is ``up`` and its x axis the pose's most horizontal axis."""
     if up is None:
@@ -146,10 +129,7 @@ class SubmapBuilder:
         self.seq = 0
         self.frames_seen = 0
         self.frames_skipped = 0
-        # Where the distance is measured from (the pose that closed the last submap) and the
-        # rotation where turning was last counted (sensor → map).
-        self._origin: np.ndarray | None = None
-        self._mark: np.ndarray | None = None
+        self._last_pose: np.ndarray | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -159,8 +139,8 @@ class SubmapBuilder:
         self.stamps: list[float] = []
         self.frame_gmms: list[Gmm] = []
         self.busy_s = 0.0
-        self.travelled = 0.0  # metres from where the submap began
-        self.turned = 0.0  # degrees turned about the vertical since the submap began
+        self.travelled = 0.0  # metres of odometry path since the submap began
+        self.turned = 0.0  # degrees turned since the submap began
 
     @property
     def frames_per_submap(self) -> int:
@@ -192,51 +172,44 @@ class SubmapBuilder:
         self.busy_s += time.perf_counter() - start
         if not (self.stamps and self._full()):
             return None
-        turned, origin = self._overshoot(frame.pose)
+        carry = self._overshoot()
         submap = self._emit()
-        self.turned, self._origin = turned, origin
+        self.travelled, self.turned = carry
         return submap
 
     def state(self) -> dict:
-        """What `resume` needs to go on where this builder is, right after a submap: where the
-        next one's distance is measured from and its turning so far (JSON-ready)."""
-        return {
-            "turned": self.turned,
-            "origin": None if self._origin is None else self._origin.tolist(),
-            "mark": None if self._mark is None else self._mark.tolist(),
-        }
+        """What `resume` needs to go on where this builder is, right after a submap: the pose
+        of the frame that closed it and the motion carried past its limit (JSON-ready)."""
+        last = None if self._last_pose is None else self._last_pose.tolist()
+        return {"travelled": self.travelled, "turned": self.turned, "last_pose": last}
 
     def resume(self, state: dict) -> None:
         """Go on from a `state` (a robot restarting on its store), so that the next submaps
         close where the uninterrupted builder's would have."""
-        self.turned = float(state["turned"])
-        self._origin, self._mark = (
-            None if state.get(k) is None else np.array(state[k]) for k in ("origin", "mark")
-        )
+        self.travelled, self.turned = float(state["travelled"]), float(state["turned"])
+        last = state.get("last_pose")
+        self._last_pose = None if last is None else np.array(last, dtype=float)
 
     def _move(self, pose: np.ndarray) -> None:
-        """The distance from where the submap began (the straight line: a swaying sensor's
-        path is longer the faster it is sampled), and the turning about the vertical counted
-        in steps of `STEP_DEG` (see `heading_change`)."""
-        if self._origin is None or self._mark is None:
-            self._origin, self._mark = pose[:3, 3].copy(), pose[:3, :3].copy()
-        self.travelled = float(np.linalg.norm(pose[:3, 3] - self._origin))
-        turned = math.degrees(heading_change(self._mark, pose[:3, :3], self.options.up))
-        if turned >= STEP_DEG:
-            self.turned += turned
-            self._mark = pose[:3, :3].copy()
+        """Adds the motion from the previous frame to this submap's: from the frame that closed
+        the last submap on, so that no step between submaps is lost at a low rate."""
+        last, self._last_pose = self._last_pose, pose
+        if last is None:
+            return
+        step = np.linalg.inv(last) @ pose
+        self.travelled += float(np.linalg.norm(step[:3, 3]))
+        cos = (np.trace(step[:3, :3]) - 1.0) / 2.0
+        self.turned += math.degrees(math.acos(min(1.0, max(-1.0, cos))))
 
-    def _overshoot(self, pose: np.ndarray) -> tuple[float, np.ndarray]:
-        """Where the next submap starts from, past the limit that closed this one: turning
-        past ``submap_angle``, or the point ``submap_distance`` out on the line to ``pose``, so
-        that boundaries fall every so many metres or degrees whatever the frame rate."""
-        o, here = self.options, pose[:3, 3].copy()
-        if o.submap_distance and self.travelled >= o.submap_distance and self._origin is not None:
-            step = (here - self._origin) / self.travelled
-            return 0.0, self._origin + step * o.submap_distance
+    def _overshoot(self) -> tuple[float, float]:
+        """The motion past the limit that closed the submap, which the next one starts with:
+        so boundaries fall every ``submap_distance`` m of path whatever the frame rate."""
+        o = self.options
+        if o.submap_distance and self.travelled >= o.submap_distance:
+            return self.travelled % o.submap_distance, 0.0
         if o.submap_angle and self.turned >= o.submap_angle:
-            return self.turned % o.submap_angle, here
-        return 0.0, here
+            return 0.0, self.turned % o.submap_angle
+        return 0.0, 0.0
 
     def _full(self) -> bool:
         """Whether the submap closes here: by space when it is set, else by frame count."""
