@@ -201,24 +201,28 @@ class SubmapBuilder:
         cos = (np.trace(step[:3, :3]) - 1.0) / 2.0
         self.turned += math.degrees(math.acos(min(1.0, max(-1.0, cos))))
 
+    def _limits(self) -> tuple[bool, bool]:
+        """Whether the submap's path and its turning have reached their limits (by space)."""
+        o = self.options
+        return (
+            bool(o.submap_distance and self.travelled >= o.submap_distance),
+            bool(o.submap_angle and self.turned >= o.submap_angle),
+        )
+
     def _overshoot(self) -> tuple[float, float]:
         """The motion past the limit that closed the submap, which the next one starts with:
         so boundaries fall every ``submap_distance`` m of path whatever the frame rate."""
         o = self.options
-        if o.submap_distance and self.travelled >= o.submap_distance:
+        far, turned = self._limits()
+        if far:
             return self.travelled % o.submap_distance, 0.0
-        if o.submap_angle and self.turned >= o.submap_angle:
+        if turned:
             return 0.0, self.turned % o.submap_angle
         return 0.0, 0.0
 
     def _full(self) -> bool:
         """Whether the submap closes here: by space when it is set, else by frame count."""
-        o = self.options
-        if len(self.stamps) >= self.frames_per_submap:
-            return True
-        return bool(o.submap_distance and self.travelled >= o.submap_distance) or bool(
-            o.submap_angle and self.turned >= o.submap_angle
-        )
+        return len(self.stamps) >= self.frames_per_submap or any(self._limits())
 
     def flush(self) -> Submap | None:
         """The partial submap of the frames added since the last one (None if there are none)."""
