@@ -12,7 +12,9 @@ seed, and per real cross-session case, through `gmmap.eval.sessions.evaluate_ses
   registers right; its recall at full precision scored by its inlier fraction);
 - ``bytes_median`` per submap on the wire (`gmmap.encode`), ``bytes_per_metre`` of odometry
   path (all robots' submaps over all robots' paths), ``eval_time_per_candidate_s``
-  (the whole evaluation per candidate: the merge, the GICP baseline and the floor).
+  (the whole evaluation per candidate: the merge, the GICP baseline and the floor);
+- ``no_guess``: registration with no initial guess on the pairs that overlap, right and time per
+  pair, gmmap's beside KISS-Matcher's on the same pairs (`gmmap.eval.noguess`).
 
 Setups: ``lidar16`` (16 beams over ±15°, 5 Hz, a wheeled robot), ``lidar360_2hz`` and
 ``lidar360_10hz`` (32 beams over ±45°, 10° of roll and pitch: a handheld 360° LiDAR),
@@ -79,6 +81,7 @@ def case(sessions: dict, config: Config, metres: float) -> dict:
         "wrong": len(wrong),
         **{k: r[k] for k in ("positives", "candidates", "verified", "precision", "recall")},
         "gicp": r["gicp"],
+        "no_guess": r["no_guess"],
         "bytes_median": float(np.median(sizes)),
         "bytes_per_metre": sum(sizes) / metres,
         "eval_time_per_candidate_s": elapsed / max(1, r["candidates"]),
@@ -132,6 +135,14 @@ def totals(runs: list[dict]) -> dict:
     total = {k: sum(r[k] for r in runs) for k in ("pairs", "met", "joined", "wrong", "verified")}
     right = sum(round((r["precision"] or 0) * r["verified"]) for r in runs)
     total["precision"] = right / total["verified"] if total["verified"] else None
+    for method in ("gmmap", "kiss_matcher"):
+        done = [r["no_guess"][method] for r in runs if "right" in r["no_guess"][method]]
+        pairs = sum(r["no_guess"]["pairs"] for r in runs)
+        total[f"no_guess_{method}"] = {
+            "right": sum(d["right"] for d in done) if done else None,
+            "pairs": pairs,
+            "time_s": float(np.mean([d["time_s"] for d in done])) if done else None,
+        }
     total["bytes_median"] = float(np.median([r["bytes_median"] for r in runs]))
     total["bytes_per_metre"] = float(np.median([r["bytes_per_metre"] for r in runs]))
     return total

@@ -207,10 +207,13 @@ def test_eval_merge_reports_sessions_against_truth():
     r = CliRunner().invoke(main, [*args, "--frames-per-submap", "2", "--min-matches", "1"])
     assert r.exit_code == 0, r.output
     report = json.loads(r.stdout)
-    assert SESSION_KEYS | {"gicp", "floor"} <= set(report)
+    assert SESSION_KEYS | {"gicp", "floor", "no_guess"} <= set(report)
     assert report["joined"] and report["precision"] == 1.0
     assert report["frame_t_error"] < 0.05 and report["frame_r_error_deg"] < 2.0
     assert report["floor"]["n"] >= 1 and report["gicp"]["candidates_registered_right"] >= 1
+    no_guess = report["no_guess"]
+    assert no_guess["pairs"] >= 1 and no_guess["gmmap"]["right"] >= 1
+    assert "right" in no_guess["kiss_matcher"] or "not installed" in no_guess["kiss_matcher"]["skipped"]
     bad = CliRunner().invoke(main, ["eval", "merge", f"{s}@a:b"])
     assert bad.exit_code == 2 and "PATH@START:STOP" in bad.output
 

@@ -18,7 +18,9 @@ otherwise), then, from the outside:
   candidates: how many it registers correctly, and its recall at 100 % precision when its
   inlier fraction is the score;
 - ``floor``: GICP on the positive candidates' points started at the truth, and how far it moves
-  away: what two sessions' poses and smeared submaps agree to at best.
+  away: what two sessions' poses and smeared submaps agree to at best;
+- ``no_guess``: registration with no initial guess on the positive pairs, beside KISS-Matcher on
+  their points (`gmmap.eval.noguess`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 
 from gmmap.config import Config
 from gmmap.eval.merge import merge
+from gmmap.eval.noguess import no_guess
 from gmmap.eval.place import is_correct, positives, pr_curve, truth, verify_gicp
 from gmmap.eval.registration import error_summary, pose_errors
 from gmmap.mapping.place import Match
@@ -69,6 +72,7 @@ def evaluate_sessions(
         out["gicp"] = gicp_verification(mapper.matches, held, pos, index, out["positives"])
         voxel = (config or Config()).build.voxel_size
         out["floor"] = floor(mapper.matches, held, pos, index, voxel)
+        out["no_guess"] = no_guess([held[k] for k in order], pos, mapper.db)
     return out
 
 
