@@ -1,41 +1,54 @@
 """The fetch stage (`gmmap.fleet.sharing.fetching`): which quiet robots a mapping robot asks the
 robots in between about, and how."""
 
-import threading
+import queue
 from types import SimpleNamespace
 
-from gmmap.fleet.sharing.fetching import Fetching
+from gmmap.fleet.sharing.fetching import Fetcher
 from gmmap.fleet.sharing.holdings import LINGER, MAPPING
+from gmmap.fleet.sharing.shared import Shared
 
 
-class Node(Fetching):
-    """A robot "a" whose peers ``present`` are, of which ``quiet`` sent nothing of late."""
+class Node(Fetcher):
+    """The fetcher of a robot "a" whose peers ``present`` are, of which ``quiet`` sent nothing
+    of late."""
 
     def __init__(
         self, present, quiet, states=None, held=None, state=MAPPING, adverts=None, latest=None
     ):
-        self.robot, self.stopping, self._state = "a", False, state
-        self.lossy = latest is not None  # the newest seq each robot sent us itself
-        self._lock, self.counts = threading.Lock(), {"fetched": 0}
         self.asked: list[tuple] = []
         self.answers: dict[str | None, list] = {}  # what a fetch via each robot returns
-        self.transport = SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer)
-        self.arrivals = SimpleNamespace(
-            relayed=lambda r, p: r in quiet,
-            quiet=lambda p: [r for r in p if r in quiet],
-            since=lambda r, seqs: len(seqs),
-            held=lambda r, seqs: set(seqs),
-            add=lambda r, s: True,
-            now=lambda: 0.0,
-            on_its_way=lambda r, since: False,
-            latest=lambda r: (latest or {}).get(r, -1),
-            patient=False,
-            unanswered=lambda r, asked: False,
-        )
-        self.holdings = SimpleNamespace(states=lambda: states or {}, adverts=lambda: adverts or {})
         held = {"b": 3, "c": 3} if held is None else held
-        self.store = SimpleNamespace(
-            count=lambda r, kind: held.get(r, 0), seqs=lambda r: list(range(held.get(r, 0)))
+        super().__init__(
+            Shared(
+                robot="a",
+                store=SimpleNamespace(
+                    count=lambda r, kind: held.get(r, 0),
+                    seqs=lambda r: list(range(held.get(r, 0))),
+                ),
+                transport=SimpleNamespace(peers=lambda: list(present), fetch=self._fetch_answer),
+                door=SimpleNamespace(admit=lambda *a: True),
+                arrivals=SimpleNamespace(
+                    relayed=lambda r, p: r in quiet,
+                    quiet=lambda p: [r for r in p if r in quiet],
+                    since=lambda r, seqs: len(seqs),
+                    held=lambda r, seqs: set(seqs),
+                    add=lambda r, s: True,
+                    now=lambda: 0.0,
+                    on_its_way=lambda r, since: False,
+                    latest=lambda r: (latest or {}).get(r, -1),
+                    patient=False,
+                    unanswered=lambda r, asked: False,
+                ),
+                holdings=SimpleNamespace(
+                    states=lambda: states or {}, adverts=lambda: adverts or {}
+                ),
+                fetch_queue=queue.Queue(),
+                counts={"fetched": 0},
+                enqueue=lambda item: None,
+                lossy=latest is not None,  # the newest seq each robot sent us itself
+                state=state,
+            )
         )
 
     def _fetch_answer(self, robot, kind, since, relay=False, via=None, held=()):
@@ -45,33 +58,33 @@ class Node(Fetching):
 
 
 def test_a_quiet_robot_is_asked_about_while_another_is_heard() -> None:
-    assert Node(["b", "c"], quiet={"b"})._stalled() == ["b"]
+    assert Node(["b", "c"], quiet={"b"}).stalled() == ["b"]
 
 
 def test_nothing_is_asked_when_no_one_is_heard_or_we_do_not_map() -> None:
-    assert Node(["b", "c"], quiet={"b", "c"})._stalled() == []  # no robot in between
-    assert Node(["b", "c"], quiet={"b"}, state=LINGER)._stalled() == []  # adverts do it then
+    assert Node(["b", "c"], quiet={"b", "c"}).stalled() == []  # no robot in between
+    assert Node(["b", "c"], quiet={"b"}, state=LINGER).stalled() == []  # adverts do it then
 
 
 def test_a_lingering_robot_or_one_never_heard_is_not_asked_about() -> None:
-    assert Node(["b", "c"], quiet={"b"}, states={"b": LINGER})._stalled() == []
-    assert Node(["b", "c"], quiet={"b"}, held={"c": 2})._stalled() == []
+    assert Node(["b", "c"], quiet={"b"}, states={"b": LINGER}).stalled() == []
+    assert Node(["b", "c"], quiet={"b"}, held={"c": 2}).stalled() == []
 
 
 def test_a_probe_asks_the_robots_in_between_without_an_advert() -> None:
     node = Node(["b", "c"], quiet={"b"})
-    node._fetch({"b"})  # no advert says anyone holds more: no query
+    node.fetch({"b"})  # no advert says anyone holds more: no query
     assert node.asked == []
-    node._fetch(set(node._stalled()), probe=True)
+    node.fetch(set(node.stalled()), probe=True)
     assert node.asked == [("b", 3, True, None)]  # from its first gap, every holder answering
 
 
 def test_on_a_lossy_link_a_gap_behind_a_robots_newest_submap_is_fetched_from_it() -> None:
     node = Node(["b", "c"], quiet=set(), held={"b": 3}, latest={"b": 5})
-    node._fetch({"b"})  # b's submap 5 came, 3 and 4 did not: b holds them
+    node.fetch({"b"})  # b's submap 5 came, 3 and 4 did not: b holds them
     assert node.asked == [("b", 3, False, None)]
     node = Node(["b", "c"], quiet=set(), held={"b": 3})
-    node._fetch({"b"})  # on a link that holds what it cannot carry yet, nothing to ask
+    node.fetch({"b"})  # on a link that holds what it cannot carry yet, nothing to ask
     assert node.asked == []
 
 
@@ -79,12 +92,12 @@ def test_a_relayed_fetch_asks_the_one_peer_we_hear_holding_the_most() -> None:
     adverts = {"b": {"b": 9}, "c": {"b": 5}, "d": {"b": 6}, "e": {"b": 6}}
     node = Node(["b", "c", "d", "e"], quiet={"b"}, state=LINGER, adverts=adverts)
     node.answers["d"] = [(3, b"3")]
-    node._fetch({"b"})
+    node.fetch({"b"})
     assert node.asked == [("b", 3, True, "d")]  # b is quiet; d and e hold 6, d comes first
     assert node.held == {0, 1, 2}  # what arrived: the answer leaves it out
     node.answers.clear()
     node.asked.clear()
-    node._fetch({"b"})  # d answers nothing (its link stalled): every peer is asked
+    node.fetch({"b"})  # d answers nothing (its link stalled): every peer is asked
     assert node.asked == [("b", 3, True, "d"), ("b", 3, True, None)]
 
 

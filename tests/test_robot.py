@@ -249,7 +249,7 @@ def test_a_fetch_asks_only_for_what_an_advert_shows_and_has_not_arrived(tmp_path
     b.arrivals.add("a", 0)
     b.arrivals.add("a", 1)  # queued, not stored yet: the advert's count, not news
     b.arrivals.add("c", 0)
-    b._fetch({"a", "c"})
+    b.fetcher.fetch({"a", "c"})
     assert asked == [("c", 1)]
 
 

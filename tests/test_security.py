@@ -165,9 +165,9 @@ def test_a_relayed_submap_altered_in_transit_is_refused_and_the_original_taken(
     original = seal(load(fleet["b"]).sign, "f", "b", "submap", 0, submap_bytes(frames, "b", 0))
     altered = bytearray(original)
     altered[100] ^= 0x40  # c, in between, changes one bit
-    a._enqueue_fetched("b", 0, bytes(altered))  # as c's fetch reply would bring it
+    a.fetcher.enqueue_fetched("b", 0, bytes(altered))  # as c's fetch reply would bring it
     assert a.door.refusals.snapshot() == {"b": {"bad_signature": 1}}
-    a._enqueue_fetched("b", 0, original)
+    a.fetcher.enqueue_fetched("b", 0, original)
     a.start()
     assert wait(lambda: a.store.seqs("b") == [0]) and a.counts["fetched"] == 1
 

@@ -120,7 +120,7 @@ def open_data(
     **options,
 ):
     """The dataset at ``path`` (``format``: None, detected); a ROS bag with the topics and
-    frames of ``ros`` (the config's ``ros`` section, `gmmap.options.RosOptions`)."""
+    frames of ``ros`` (the config's ``ros`` section, `gmmap.ros_options.RosOptions`)."""
     from gmmap.io import datasets
 
     if ros is not None and (format or datasets.detect_format(path)) == "rosbag":

@@ -1,13 +1,14 @@
 """A robot node's ROS 1 side (``gmmap robot --ros1``), through Debian's ROS 1 (``make ros1``:
 ros-core, python3-rospy and the message packages, for the system Python 3.11).
 
-The same inputs and outputs as the ROS 2 side (`gmmap.io.ros2bridge`, `gmmap.options.RosOptions`):
-sensor_msgs/PointCloud2 on ``cloud_topic``, or depth sensor_msgs/Image on ``depth_topic`` with
-its CameraInfo, and nav_msgs/Odometry on ``odom_topic`` (or, with ``tf_parent``, the chain of
-/tf and /tf_static down to ``tf_child``: `gmmap.io.tfchain`) in; the merged map as a
-MarkerArray of ellipsoids and a sampled PointCloud2, the TF tree between the robots' maps on
-/tf and a JSON status out. rospy runs the node against the ROS master of ``ROS_MASTER_URI``;
-/tf_static is latched there, so a node started late still gets the mountings.
+The same inputs and outputs as the ROS 2 side (`gmmap.io.ros2bridge`,
+`gmmap.ros_options.RosOptions`): sensor_msgs/PointCloud2 on ``cloud_topic``, or depth
+sensor_msgs/Image on ``depth_topic`` with its CameraInfo, and nav_msgs/Odometry on
+``odom_topic`` (or, with ``tf_parent``, the chain of /tf and /tf_static down to ``tf_child``:
+`gmmap.io.tfchain`) in; the merged map as a MarkerArray of ellipsoids and a sampled
+PointCloud2, the TF tree between the robots' maps on /tf and a JSON status out. rospy runs the
+node against the ROS master of ``ROS_MASTER_URI``; /tf_static is latched there, so a node
+started late still gets the mountings.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from gmmap.io.ros2bridge import MAP_POINTS, Bridge, tf_tree
 from gmmap.io.ros2msgs import camera_of, depth_points, ellipsoids, pose_matrix, robot_color
 from gmmap.mapping.live import LiveInput
 from gmmap.math.geometry import matrix_to_quaternion
-from gmmap.options import RosOptions
+from gmmap.ros_options import RosOptions
 
 log = logging.getLogger(__name__)
 

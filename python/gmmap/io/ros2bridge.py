@@ -1,5 +1,5 @@
 """A robot node's ROS 2 side, over Zenoh (``gmmap robot --ros2``): ROS 2 topics in, the merged
-map, the frames between robots and a status out (`gmmap.options.RosOptions`).
+map, the frames between robots and a status out (`gmmap.ros_options.RosOptions`).
 
 ROS 2 speaks Zenoh two ways, and both are plain Zenoh key expressions with CDR payloads
 (`gmmap.io.ros2`): rmw_zenoh (``<domain>/<topic>/<type>/<hash>``, with an attachment of
@@ -40,7 +40,7 @@ from gmmap.errors import InvalidInputError, TransportError
 from gmmap.io import ros2
 from gmmap.io.tfchain import TfChain
 from gmmap.mapping.live import LiveInput
-from gmmap.options import RosOptions
+from gmmap.ros_options import RosOptions
 
 log = logging.getLogger(__name__)
 

@@ -8,7 +8,7 @@ builds, messages wait here and leave in this order:
    wait (only the latest waits: it says all the robot holds);
 2. own submaps, newest first. Two robots that meet are near each other now, so their newest
    submaps are the likeliest to overlap, verify and join their maps; the older ones follow
-   (a peer fills the gaps by fetching, `RobotNode._fetch`, whose answers go oldest first so
+   (a peer fills the gaps by fetching, `Fetcher.fetch`, whose answers go oldest first so
    that a fetch its timeout cuts short resumes from its first gap).
 
 Own submaps leave in bundles (`RobotOptions.bundle`): the outbox holds them until ``bundle``

@@ -16,16 +16,22 @@ Stages, each a thread:
   as an edge.
 - **optimisation**: woken whenever the graph changed; `Mapper.optimize`, whose `TfGraph` gives
   the frames between robots for status and the report.
-- **fetch**: when a peer joins, a robot that holds anything tells it, alone, what (an advert,
-  `gmmap.fleet.sharing.holdings`, `gmmap.fleet.sharing.lingering`), and each fetches the robots the
-  other's advert holds more of (from the first gap, else from the latest seq + 1); it serves fetches
-  from its store, so a robot that was away catches up from whoever is present, and the submaps
-  of a robot out of its reach, or present but silent or quiet (`gmmap.fleet.sharing.arrivals`), come
-  through the robots in between (`Transport.fetch`, ``via``), even while it maps
-  (`gmmap.fleet.sharing.fetching`: while it maps it also asks them for the newest of a robot that
+- **fetch** (its `Fetcher`, `gmmap.fleet.sharing.fetching`): when a peer joins, a robot that
+  holds anything tells it, alone, what (an advert, `gmmap.fleet.sharing.holdings`), and each
+  fetches the robots the other's advert holds more of (from the first gap, else from the latest
+  seq + 1); it serves fetches from its store, so a robot that was away catches up from whoever
+  is present, and the submaps of a robot out of its reach, or present but silent or quiet
+  (`gmmap.fleet.sharing.arrivals`), come through the robots in between (`Transport.fetch`,
+  ``via``), even while it maps (while it maps it also asks them for the newest of a robot that
   fell quiet). Robots that meet fresh send neither.
-- **ending** (`gmmap.fleet.sharing.lingering`): after its frames the node lingers, telling its peers
-  what it holds, until they hold the same and every robot it knows of is done mapping.
+- **ending** (its `Lingerer`, `gmmap.fleet.sharing.lingering`): after its frames the node
+  lingers, telling its peers what it holds, until they hold the same and every robot it knows
+  of is done mapping; then it leaves the fleet and finishes its matching.
+
+Parts: the node owns its store, `Mapper`, `Transport`, `Outbox` and `Door`, and the two parts
+that talk to its peers for it, the `Fetcher` and the `Lingerer` (which also tells joining
+peers what it holds). Both are built on one `Shared` (`gmmap.fleet.sharing.shared`): the
+collaborators they use, the node's lock and stop flag, and the way into its keeping stage.
 
 Persistence: the store holds own and received submaps, edges, and in ``meta`` how many input
 frames the construction stage had consumed when it emitted its last submap. A restarted node
@@ -57,8 +63,9 @@ from gmmap.fleet.security.door import Door
 from gmmap.fleet.sharing import holdings, linkstats
 from gmmap.fleet.sharing.arrivals import Arrivals, quiet_for
 from gmmap.fleet.sharing.events import Arrived, Built, BuiltCallback, sizes_of
-from gmmap.fleet.sharing.fetching import KIND, Fetching
-from gmmap.fleet.sharing.lingering import Lingering
+from gmmap.fleet.sharing.fetching import Fetcher
+from gmmap.fleet.sharing.lingering import Lingerer
+from gmmap.fleet.sharing.shared import KIND, Shared
 from gmmap.fleet.storage.records import edge_of
 from gmmap.fleet.storage.reload import reload
 from gmmap.fleet.storage.store import Store
@@ -77,13 +84,15 @@ META_CARRIED = "builder_state"  # `SubmapBuilder.state` after the robot's last s
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
 
 
-class RobotNode(Fetching, Lingering):
+class RobotNode:
     """One robot: ``start()``, feed it with ``run(frames)`` (or ``start_frames``), ``stop()``.
 
     ``config.robot`` names it, its fleet and its store; ``config.transport`` its endpoints;
-    build, select, place, register and backend configure its mapping."""
+    build, select, place, register and backend configure its mapping. Its fetch stage is its
+    ``fetcher``, its adverts and ending its ``lingerer``; both work on what ``shared`` holds."""
 
     watch = False  # a station (`gmmap.fleet.node.station`) holds no liveliness token
+    tells = True  # and advertises nothing (`Lingerer.tells`)
 
     def __init__(self, config: Config, on_built: BuiltCallback | None = None) -> None:
         self.config = config
@@ -109,14 +118,6 @@ class RobotNode(Fetching, Lingering):
         bundled = config.robot.bundle_size > 1
         self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
         self.holdings = holdings.Holdings()  # what the peers say they hold
-        # Datagrams sent while a link was down are lost, not held: a robot heard again is
-        # caught up with at once (`Lingering._heard_again`).
-        self.lossy = config.transport.protocol == "udp"
-        # Adverts are numbered from the clock (ms), so a restarted robot's stay the newest.
-        self._adverts, self._told_at, self._told = time.time_ns() // 1_000_000, 0.0, {}
-        self._told_done: dict[str, int] = {}  # the robots done mapping our last advert named
-        self._joiners: dict[str, float] = {}  # peers that joined, not yet told: when
-        self._told_state = self._state = holdings.MAPPING
         self._closed, self._live = False, None
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)
         self.frames_consumed = int(self.store.get_meta(META_FRAMES, "0") or 0)
@@ -133,6 +134,22 @@ class RobotNode(Fetching, Lingering):
         self.budget = Budget(config.robot.budget)
         sending = (fleet, self.robot), config.robot.bundle_size, config.robot.bundle_wait
         self.outbox = Outbox(self._publish, self.budget, holdings.KIND, *sending)
+        self.shared = Shared(
+            robot=self.robot,
+            store=self.store,
+            transport=self.transport,
+            door=self.door,
+            arrivals=self.arrivals,
+            holdings=self.holdings,
+            fetch_queue=self.fetch_queue,
+            counts=self.counts,
+            enqueue=self._enqueue,
+            lock=self._lock,
+            stop=self._stopping,
+            lossy=config.transport.protocol == "udp",
+        )
+        self.fetcher = Fetcher(self.shared)
+        self.lingerer = Lingerer(self.shared, self.outbox, self._delivered, self.tells)
 
     # ---- lifecycle --------------------------------------------------------------------------
 
@@ -148,7 +165,7 @@ class RobotNode(Fetching, Lingering):
             ("keep", self._keeping),
             ("match", self._matching),
             ("optimise", self._optimisation),
-            ("fetch", self._fetcher),
+            ("fetch", self.fetcher.run),
         ):
             self._spawn(name, target)
 
@@ -177,6 +194,24 @@ class RobotNode(Fetching, Lingering):
         self.linger(self.config.robot.linger)
         return self.report()
 
+    def linger(self, seconds: float, progress: Callable | None = None) -> bool:
+        """Work on for ``seconds`` after the frames, then until the peers hold what we hold and
+        no more, and every robot we know of is done mapping and its last submap is here
+        (`gmmap.fleet.sharing.holdings`), or ``robot.deadline`` s; True if complete. Then leave the
+        fleet (`gmmap.fleet.sharing.lingering`), and finish matching."""
+        if self.stopping:
+            return False
+        end = time.monotonic() + max(seconds, self.config.robot.deadline)
+        complete = self.lingerer.linger(seconds, end, progress)
+        # The rejudging needs every submap held by the matching stage first.
+        self.shared.wait(self._matched, max(5.0, end - time.monotonic()))
+        if self.config.robot.rejudge and not self.stopping:
+            if progress:
+                progress(f"{self.robot}: judging all {len(self.mapper.submaps)} submaps again")
+            self.mapper = self.mapper.rejudged()
+            self.store.replace_edges(edge_of(m) for m in self.mapper.matches)
+        return complete
+
     @property
     def stopping(self) -> bool:
         return self._stopping.is_set()
@@ -186,9 +221,6 @@ class RobotNode(Fetching, Lingering):
         self._stopping.set()
         if self._live is not None:
             self._live.close()
-
-    def _held(self) -> dict[str, int]:
-        return {r: self.store.count(r, KIND) for r in {*self.store.robots(), self.robot}}
 
     def _publish(self, kind: str, seq: int, payload: bytes, to: frozenset[str] | None) -> None:
         """The outbox's way out (its thread): a submap counts as sent once published."""
@@ -213,15 +245,7 @@ class RobotNode(Fetching, Lingering):
 
     def drain(self, timeout: float = 10.0) -> bool:
         """Wait until inbox, fetches and optimisation are idle (True) or ``timeout`` s pass."""
-        return self._wait(lambda: self._delivered() and self._matched(), timeout)
-
-    def _wait(self, done: Callable[[], bool], timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not self.stopping:
-            if done():
-                return True
-            time.sleep(0.02)
-        return False
+        return self.shared.wait(lambda: self._delivered() and self._matched(), timeout)
 
     def stop(self) -> None:
         """Stop the stages (queued work is dropped: it is in the store; a held bundle gets
@@ -291,16 +315,19 @@ class RobotNode(Fetching, Lingering):
             self._unkept += 1
         self.inbox.put(item)
 
+    def _joined(self, peer: str) -> None:
+        self.lingerer.joined(peer)
+
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         if not self.door.admit(robot, kind, seq, payload):
             return
-        if self.lossy:
-            self._heard_again(robot, seq if kind == KIND else None)
+        if self.shared.lossy:
+            self.lingerer.heard_again(robot, seq if kind == KIND else None)
         if kind == KIND:
             if self.arrivals.add(robot, seq, direct=True):  # else a duplicate, or a replay
                 self._enqueue(Arrived("received", robot, seq, payload))
         elif kind == holdings.KIND and self.holdings.update(robot, self.door.inner(payload), seq):
-            wanted = holdings.wanted({robot: self.holdings.adverts()[robot]}, self._held())
+            wanted = holdings.wanted({robot: self.holdings.adverts()[robot]}, self.shared.held())
             # After its first advert since it joined, only what it alone can hand on to us.
             if not self.holdings.caught_up(robot):
                 wanted = [r for r in wanted if self.arrivals.relayed(r, self.transport.peers())]

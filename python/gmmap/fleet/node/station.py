@@ -37,6 +37,7 @@ class StationNode(RobotNode):
     """Watches ``config.robot.fleet`` under the name ``config.robot.name``."""
 
     watch = True
+    tells = False
 
     def __init__(self, config: Config, sweep_s: float | None = None) -> None:
         folder = config.security.credentials
@@ -68,11 +69,6 @@ class StationNode(RobotNode):
         super()._enqueue(item)
 
     def _serve(self) -> None:  # answers no fetch
-        pass
-
-    def _advertise(  # tells nothing
-        self, counts: dict[str, int], state: str, to: frozenset[str] | None = None
-    ) -> None:
         pass
 
     def _joined(self, peer: str) -> None:
@@ -119,5 +115,5 @@ class StationNode(RobotNode):
     def _take(self, robot: str, got: list[tuple[int, bytes]]) -> int:
         before = self.counts["fetched"]
         for seq, payload in got:
-            self._enqueue_fetched(robot, seq, payload)
+            self.fetcher.enqueue_fetched(robot, seq, payload)
         return self.counts["fetched"] - before
