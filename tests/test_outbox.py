@@ -167,3 +167,23 @@ def test_a_bad_bundle_is_refused(bad) -> None:
 def test_a_bad_budget_is_refused(bad: float) -> None:
     with pytest.raises(InvalidInputError):
         RobotOptions(budget=bad)
+
+
+def test_robots_on_a_shared_channel_take_equal_shares_within_their_budget():
+    from gmmap.fleet.net.outbox import AIR_SHARE, air_share
+
+    assert air_share(None, 3, None) is None and air_share(None, 3, 800.0) == 800.0
+    assert air_share(500.0, 1, None) == AIR_SHARE * 500.0
+    assert air_share(500.0, 5, None) == AIR_SHARE * 100.0  # a fifth each: nobody starves
+    assert air_share(500.0, 2, 50.0) == 50.0  # never above the robot's own budget
+
+
+def test_a_budget_takes_its_new_rate_at_once():
+    budget = Budget(None)
+    budget.set_rate(1_000.0)
+    assert budget.take(1_000)  # the burst of the new rate
+    start = time.monotonic()
+    assert budget.take(200)  # then 200 B at 1,000 B/s
+    assert time.monotonic() - start >= 0.15
+    budget.set_rate(None)
+    assert budget.take(10**9)

@@ -5,6 +5,7 @@ a robot's transport, its node, its security, and the demo's emulated links. Like
 
 from __future__ import annotations
 
+import ipaddress
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -28,6 +29,17 @@ class TransportOptions:
     scouting is off by default so that fleets on one network only meet through ``connect``
     endpoints (Zenoh's gossip still lets peers of peers find each other). ``zenoh_options``
     are raw Zenoh configuration entries (``{"transport/link/tx/lease": 5000}``) applied last.
+
+    ``broadcast``: on one radio channel shared by the fleet, a UDP multicast group
+    (``udp/224.0.0.224:7447``, ``#iface=<name>`` to pick the interface, else the route to the
+    group picks it; a loopback needs ``ip link set lo multicast on``): submaps and adverts go on
+    the air once for every robot in range (`gmmap.fleet.net.air`); presence, fetches and their
+    answers stay on the unicast links, which repair what a robot missed. Not in a secured
+    fleet: the group has no TLS. ``channel_rate``: the shared channel's bytes/s, all robots
+    together; each robot then sends (submaps, adverts and fetch answers) within an equal share
+    of it, over the robots present (`gmmap.fleet.net.outbox.air_share`), and within
+    ``robot.budget`` where that is lower. Without it, datagrams on a saturated channel are
+    dropped (broadcast has no congestion control) and the robots' TCP links stall behind them.
     """
 
     #: Zenoh listen endpoints; null: one loopback endpoint on port
@@ -40,6 +52,10 @@ class TransportOptions:
     #: Zenoh multicast scouting: meet peers on the network without connect
     multicast_scouting: bool = False
     fetch_timeout: float = 2.0  #: Seconds a query to peers waits for answers
+    #: UDP multicast group of a shared channel (udp/224.0.0.224:7447); null: unicast links only
+    broadcast: str | None = None
+    #: Bytes/s of the radio channel all robots share; each sends within its share. null: none
+    channel_rate: float | None = None
     #: Raw Zenoh configuration entries, applied last
     zenoh_options: Mapping[str, Any] = field(default_factory=dict)
 
@@ -64,11 +80,38 @@ class TransportOptions:
             raise TransportConfigError(f"fetch_timeout must be > 0 s; got {self.fetch_timeout!r}")
         if not isinstance(self.zenoh_options, Mapping):
             raise TransportConfigError("zenoh_options must be a mapping of key to value")
+        if self.broadcast is not None:
+            check_multicast(self.broadcast)
+        rate = self.channel_rate
+        if rate is not None and not (
+            isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0
+        ):
+            raise TransportConfigError(f"channel_rate must be > 0 bytes/s or null; got {rate!r}")
 
     @property
     def link_protocol(self) -> str:
         """The protocol of an unsecured robot's links: ``protocol``, TCP where unset."""
         return self.protocol or "tcp"
+
+
+def check_multicast(endpoint: str) -> str:
+    """``endpoint`` if it is ``udp/<IPv4 multicast address>:<port>[#iface=<name>]``, else
+    `TransportConfigError`."""
+    locator, _, suffix = endpoint.partition("#") if isinstance(endpoint, str) else ("", "", "")
+    proto, _, address = locator.partition("/")
+    host, _, port = address.rpartition(":")
+    try:
+        ok = proto == "udp" and ipaddress.ip_address(host).is_multicast and 0 < int(port) < 65536
+        ok = ok and (not suffix or (suffix.startswith("iface=") and len(suffix) > 6))
+    except ValueError:
+        ok = False
+    if not ok:
+        raise TransportConfigError(
+            f"broadcast must be udp/<multicast address>:<port>[#iface=<name>] "
+            f"(udp/224.0.0.224:7447); "
+            f"got {endpoint!r}"
+        )
+    return endpoint
 
 
 def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:

@@ -235,6 +235,18 @@ PROTOCOL = setting(
     "fetched again; not secured (unset: tcp, or udp on the demo's rendezvous links).",
     type=click.Choice(PROTOCOLS),
 )
+BROADCAST = setting(
+    "--broadcast",
+    "transport.broadcast",
+    "UDP multicast group of a radio channel the fleet shares (udp/224.0.0.224:7447): submaps "
+    "and adverts go on the air once for all; fetches stay unicast.",
+)
+CHANNEL_RATE = setting(
+    "--channel-rate",
+    "transport.channel_rate",
+    "Bytes/s of the radio channel all robots share; each robot sends within an equal share.",
+    type=float,
+)
 DESCRIPTOR = setting(
     "--descriptor",
     "place.descriptor",

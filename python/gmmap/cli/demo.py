@@ -26,8 +26,10 @@ from pathlib import Path
 import click
 
 from gmmap.cli.common import (
+    BROADCAST,
     BUDGET,
     BUNDLE,
+    CHANNEL_RATE,
     MIN_MATCHES,
     PROTOCOL,
     as_json_option,
@@ -370,6 +372,8 @@ def format_report(r: dict) -> str:
 @BUDGET
 @BUNDLE
 @PROTOCOL
+@BROADCAST
+@CHANNEL_RATE
 @setting(
     "--deadline",
     "robot.deadline",

@@ -9,8 +9,10 @@ from pathlib import Path
 import click
 
 from gmmap.cli.common import (
+    BROADCAST,
     BUDGET,
     BUNDLE,
+    CHANNEL_RATE,
     COVARIANCE,
     MIN_CONFIDENCE,
     MIN_MATCHES,
@@ -62,6 +64,8 @@ from gmmap.config import Config
 @BUDGET
 @BUNDLE
 @PROTOCOL
+@BROADCAST
+@CHANNEL_RATE
 @setting(
     "--deadline", "robot.deadline", "Latest end after mapping, peers complete or not.", type=float
 )

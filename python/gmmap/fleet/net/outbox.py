@@ -22,7 +22,9 @@ reach the peers ``bundle_wait`` s later.
 The budget is a token bucket over the payload and key bytes of everything this robot puts on
 its links, fetch answers included (`Budget.take`, which `Transport.serve` calls too); Zenoh's
 framing and the TCP/IP headers come on top (see docs/benchmarks.md). In Zenoh's peer mode one
-publication goes to every peer, so the budget holds on each link.
+publication goes to every peer, so the budget holds on each link. On a channel the fleet
+shares (`TransportOptions.channel_rate`) the robot takes an equal share of it, updated as
+robots come and go (`air_share`).
 """
 
 from __future__ import annotations
@@ -40,6 +42,22 @@ from gmmap.fleet.net.keys import data_key
 log = logging.getLogger(__name__)
 
 BURST_S = 1.0  # the bucket holds this many seconds of budget (and at least one message)
+# Of a shared channel's bytes/s, what the robots' messages may take together: the rest is for
+# what the budget does not count (Zenoh's framing and keep-alives, presence, fetch queries,
+# TCP/IP headers and ACKs; docs/benchmarks.md, "channel").
+AIR_SHARE = 0.6
+
+
+def air_share(channel_rate: float | None, robots: int, budget: float | None) -> float | None:
+    """A robot's budget on a channel of ``channel_rate`` bytes/s that ``robots`` share (itself
+    included): an equal share of `AIR_SHARE` of it, so that no robot starves the others, and
+    never more than its own ``budget`` (None: no limit)."""
+    if channel_rate is None:
+        return budget
+    share = AIR_SHARE * channel_rate / max(1, robots)
+    return share if budget is None else min(share, budget)
+
+
 Publish = Callable[[str, int, bytes, "frozenset[str] | None"], None]
 
 
@@ -51,6 +69,15 @@ class Budget:
         self._lock = threading.Lock()
         self._tokens = rate * BURST_S if rate else 0.0
         self._at = time.monotonic()
+
+    def set_rate(self, rate: float | None) -> None:
+        """From now on ``rate`` bytes/s; the tokens saved stay, within the new burst (a
+        bucket that had no limit starts full, as a new one does)."""
+        with self._lock:
+            now = time.monotonic()
+            saved = math.inf if self.rate is None else self._tokens + (now - self._at) * self.rate
+            self._at, self.rate = now, rate
+            self._tokens = min(saved, rate * BURST_S) if rate else 0.0
 
     def take(self, n: int, stopped: Callable[[], bool] = lambda: False) -> bool:
         """Wait until ``n`` bytes may go and take them; False if ``stopped()`` first."""

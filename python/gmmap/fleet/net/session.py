@@ -81,6 +81,10 @@ def open_session(
         raise TransportConfigError(
             "a secured robot's links are TLS over TCP: transport.protocol udp cannot carry them"
         )
+    if credentials is not None and options.broadcast is not None:
+        raise TransportConfigError(
+            "a secured robot's links are TLS: the broadcast group (transport.broadcast) has none"
+        )
     protocol = "tls" if credentials is not None else options.link_protocol
     for attempt in range(attempts):
         listen_endpoints = (

@@ -52,6 +52,7 @@ from typing import Any
 import zenoh
 
 from gmmap.errors import TransportConfigError, TransportError
+from gmmap.fleet.net.air import Air
 from gmmap.fleet.net.counters import ByteCount, Counters
 from gmmap.fleet.net.keys import (
     PREFIX,
@@ -148,6 +149,15 @@ class Transport(Querying):
         self._session, self.listen_endpoints = open_session(
             self.robot, config.options, config.credentials
         )
+        # On a shared channel messages go on the air once (`TransportOptions.broadcast`).
+        self._air: Air | None = None
+        self._hearing = False  # the broadcast is taken once someone subscribes, as a put is
+        if config.options.broadcast is not None:
+            try:
+                self._air = Air(config.options.broadcast, self._on_air)
+            except TransportError:
+                self._session.close()
+                raise
         self._events = Worker(f"gmmap-transport-events-{self.robot}")
         self._queries = Worker(f"gmmap-transport-queries-{self.robot}")
         try:
@@ -185,6 +195,8 @@ class Transport(Querying):
         # Closing the session undeclares the token (peers see us leave), subscribers, queryable.
         with contextlib.suppress(zenoh.ZError):
             self._session.close()
+        if self._air is not None:
+            self._air.close()
         if hasattr(self, "_events"):
             self._events.stop()
             self._queries.stop()
@@ -206,7 +218,10 @@ class Transport(Querying):
         data = as_payload(payload)
         key = data_key(self.fleet, self.robot, kind, seq)
         try:
-            self._session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
+            if self._air is not None and self._air.fits(key, len(data)):
+                self._air.send(key, bytes(data))
+            else:
+                self._session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
         except zenoh.ZError as err:
             raise TransportError(f"cannot publish {key}: {err}") from err
         self._counters.add("sent", self.robot, kind, len(data), len(key.encode()), False)
@@ -224,6 +239,7 @@ class Transport(Querying):
             if self._data_subscriber is not None:
                 return
             # Declared lazily: before anyone listens, messages are not received nor counted.
+            self._hearing = True
             self._data_subscriber = self._session.declare_subscriber(
                 f"{PREFIX}/{self.fleet}/*/*/*",
                 self._on_sample,
@@ -255,14 +271,24 @@ class Transport(Querying):
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
 
-    def _take(self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes) -> None:
-        """A message of another robot of the fleet (put, or told: `tell`): count and queue it
-        (its payload copied only once it is taken)."""
+    def _on_air(self, key: str, payload: bytes) -> None:
+        # The air's thread: as `_on_sample`. Our own broadcasts come back too (other robots on
+        # this host must hear them): not "ignored", as a forged one with our name would be.
+        parsed = parse_data_key(key)
+        own = parsed is not None and parsed[:2] == (self.fleet, self.robot)
+        if self._hearing and not self._closed and not own:
+            self._take(key, parsed, payload)
+
+    def _take(
+        self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes | bytes
+    ) -> None:
+        """A message of another robot of the fleet (put, broadcast, or told: `tell`): count and
+        queue it (a Zenoh payload copied only once it is taken)."""
         if parsed is None or parsed[0] != self.fleet or parsed[1] == self.robot:
             self._counters.bump("ignored")
             return
         _, robot, kind, seq = parsed
-        payload = data.to_bytes()
+        payload = data if isinstance(data, bytes) else data.to_bytes()
         self._counters.add("received", robot, kind, len(payload), len(key.encode()), False)
         self._events.submit(self._deliver, robot, kind, seq, payload)
 

@@ -55,7 +55,7 @@ from pathlib import Path
 
 from gmmap.config import Config
 from gmmap.errors import DecodeError
-from gmmap.fleet.net.outbox import Budget, Outbox
+from gmmap.fleet.net.outbox import Budget, Outbox, air_share
 from gmmap.fleet.net.transport import Transport, TransportConfig
 from gmmap.fleet.node.report import node_report
 from gmmap.fleet.security.credentials import load_for
@@ -159,6 +159,9 @@ class RobotNode:
         t.subscribe(self._receive)
         t.on_join(self.holdings.meet)
         t.on_join(self._joined)
+        t.on_join(self._share_air)
+        t.on_leave(self._share_air)
+        self._share_air()
         with self._lock:
             self._busy += 1  # the reloaded submaps, judged first by the matching stage
         for name, target in (
@@ -317,6 +320,11 @@ class RobotNode:
 
     def _joined(self, peer: str) -> None:
         self.lingerer.joined(peer)
+
+    def _share_air(self, _peer: str | None = None) -> None:
+        robots = 1 + len(self.transport.peers())
+        rate = air_share(self.config.transport.channel_rate, robots, self.config.robot.budget)
+        self.budget.set_rate(rate)
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         if not self.door.admit(robot, kind, seq, payload):

@@ -1,0 +1,114 @@
+"""Robots on one shared radio channel (`gmmap.eval.links.channel`): a broadcast goes on the air
+once for every robot that hears it, and what a robot missed it fetches over unicast.
+
+Each robot is its own process, as in the field and the demo."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+
+from gmmap.errors import TransportConfigError
+from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
+from gmmap.fleet.net.keys import free_port
+from gmmap.options import TransportOptions
+
+GROUP = "udp/224.0.0.224:7447"  # the channel routes it on its loopback
+PAYLOAD = 700  # bytes: a submap's wire size
+
+# argv: name, own port, peers' ports, what to do ("send", "listen" or "fetch").
+ROBOT = """
+import json, sys, time
+from gmmap.fleet.net.transport import Transport, TransportConfig, TransportOptions
+name, port, peers, role = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+connect = tuple(f"tcp/127.0.0.1:{p}" for p in peers.split(",") if p)
+options = TransportOptions(port=port, connect=connect, broadcast=sys.argv[5])
+with Transport(TransportConfig("air", name, options)) as t:
+    got = []
+    t.subscribe(lambda robot, kind, seq, payload: got.append([robot, seq, len(payload)]))
+    t.serve(lambda robot, kind, since: [(0, b"s" * 700)] if robot == name else [])
+    print("ready", flush=True)
+    if role == "send":
+        sys.stdin.readline()  # the go
+        t.publish("submap", 0, b"s" * 700)
+        sys.stdin.readline()
+    elif role == "listen":
+        deadline = time.monotonic() + 20
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.05)
+        print(json.dumps(got), flush=True)
+        sys.stdin.readline()  # leaving would put the session's farewells on the air
+    else:  # missed the broadcast: ask its owner over unicast
+        t.wait_for_peers(["r0"], 10)
+        print(json.dumps([[seq, len(p)] for seq, p in t.fetch("r0", timeout=5)]), flush=True)
+"""
+
+
+@pytest.fixture
+def channel():
+    try:
+        with SharedChannel() as air:
+            yield air
+    except ChannelUnavailable as err:
+        pytest.skip(f"no shared channel here: {err}")
+
+
+def _robot(air: SharedChannel, name: str, port: int, peers: list[int], role: str):
+    argv = [sys.executable, "-c", ROBOT, name, str(port), ",".join(map(str, peers)), role, GROUP]
+    p = subprocess.Popen(
+        air.command(argv), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    assert p.stdout.readline().strip() == "ready"
+    return p
+
+
+def test_one_broadcast_reaches_both_peers_and_crosses_the_air_once(channel):
+    ports = [free_port() for _ in range(3)]
+    sender = _robot(channel, "r0", ports[0], [], "send")
+    listeners = [_robot(channel, f"r{i}", ports[i], ports[:i], "listen") for i in (1, 2)]
+    try:
+        time.sleep(1.0)  # the unicast links settle: their traffic stays out of the count
+        before = channel.bytes_sent()
+        sender.stdin.write("go\n")
+        sender.stdin.flush()
+        heard = [json.loads(p.stdout.readline()) for p in listeners]
+        on_air = channel.bytes_sent() - before
+    finally:
+        for p in (sender, *listeners):
+            p.stdin.write("done\n")
+            p.stdin.flush()
+            p.wait(timeout=20)
+    assert heard == [[["r0", 0, PAYLOAD]], [["r0", 0, PAYLOAD]]]
+    # Once on the air, with its key and the UDP/IP headers; unicast to each peer would be
+    # twice the payload at least.
+    assert PAYLOAD <= on_air < 1.5 * PAYLOAD, on_air
+
+
+def test_a_robot_that_missed_a_broadcast_fetches_it_over_unicast(channel):
+    ports = [free_port() for _ in range(2)]
+    sender = _robot(channel, "r0", ports[0], [], "send")
+    try:
+        sender.stdin.write("go\n")  # nobody listens yet: the broadcast is lost to all
+        sender.stdin.flush()
+        late = _robot(channel, "r1", ports[1], ports[:1], "fetch")
+        fetched = json.loads(late.stdout.readline())
+        late.wait(timeout=20)
+    finally:
+        sender.stdin.write("done\n")
+        sender.stdin.flush()
+        sender.wait(timeout=20)
+    assert fetched == [[0, PAYLOAD]]
+
+
+@pytest.mark.parametrize(
+    "group",
+    ["udp/10.0.0.1:7447", "tcp/224.0.0.224:7447", "udp/224.0.0.224", "multicast", GROUP + "#lo"],
+)
+def test_a_broadcast_group_must_be_udp_multicast(group):
+    with pytest.raises(TransportConfigError, match="broadcast must be udp"):
+        TransportOptions(broadcast=group)
+    assert TransportOptions(broadcast=GROUP + "#iface=lo").broadcast == GROUP + "#iface=lo"
