@@ -70,3 +70,15 @@ def test_nothing_is_on_its_way_where_robots_do_not_bundle() -> None:
     a.met("r")
     a.add("r", 0, direct=True)
     assert not a.on_its_way("r", 1)
+
+
+def test_on_a_shared_channel_all_a_talking_robot_lacks_is_on_its_way() -> None:
+    """Paced to its share of the air, a robot sends its newest first and the rest behind."""
+    now = [0.0]
+    a = Arrivals(clock=lambda: now[0], shared_channel=True)
+    a.met("r")
+    assert a.on_its_way("r", 0)  # it just joined: it talks
+    a.add("r", 5, direct=True)
+    assert a.on_its_way("r", 0)  # older than its latest, still on its way
+    now[0] = QUIET_S + 1
+    assert not a.on_its_way("r", 0)  # quiet: now a fetch

@@ -34,6 +34,20 @@ DATAGRAM_RETRY = {
 }
 
 
+# On a slow shared channel one full packet takes seconds (3 s at 500 B/s) and a few wait ahead
+# of a handshake: Zenoh's 10 s to open a session ran out over and over at 500 B/s (48 TCP
+# connections opened and dropped in one 3-robot demo, a third of its air time). Allow the
+# time ~15 kB of queue would take to drain, never less than Zenoh's 10 s.
+HANDSHAKE_QUEUE_BYTES = 15_000
+
+
+def handshake_timeout_ms(channel_rate: float | None) -> int:
+    """Zenoh's time to open (and accept) a unicast session on a channel of ``channel_rate``."""
+    if channel_rate is None:
+        return 10_000
+    return max(10_000, round(1000 * HANDSHAKE_QUEUE_BYTES / channel_rate))
+
+
 def zenoh_config(
     options: TransportOptions, listen_endpoints: tuple[str, ...], credentials=None
 ) -> zenoh.Config:
@@ -48,6 +62,10 @@ def zenoh_config(
         **LEASE,
         **(DATAGRAM_RETRY if options.protocol == "udp" else {}),
     }
+    if options.channel_rate is not None:
+        timeout = handshake_timeout_ms(options.channel_rate)
+        entries["transport/unicast/open_timeout"] = timeout
+        entries["transport/unicast/accept_timeout"] = timeout
     if credentials is not None:
         plain = [e for e in (*listen_endpoints, *options.connect) if not e.startswith("tls/")]
         if plain:

@@ -116,7 +116,11 @@ class RobotNode:
         self._busy = 0  # arrivals not yet kept and matched, and a running optimisation
         self._unkept = 0  # arrivals not yet stored (or dropped)
         bundled = config.robot.bundle_size > 1
-        self.arrivals = Arrivals(quiet_s=quiet_for(config.robot), patient=bundled)
+        self.arrivals = Arrivals(
+            quiet_s=quiet_for(config.robot),
+            patient=bundled,
+            shared_channel=config.transport.broadcast is not None,
+        )
         self.holdings = holdings.Holdings()  # what the peers say they hold
         self._closed, self._live = False, None
         self.counts = dict(built=0, sent=0, received=0, fetched=0, decode_errors=0, optimised=0)

@@ -29,7 +29,11 @@ class Arrivals:
     the fetcher). Times are ``clock()`` seconds."""
 
     def __init__(
-        self, clock=time.monotonic, quiet_s: float = QUIET_S, patient: bool = True
+        self,
+        clock=time.monotonic,
+        quiet_s: float = QUIET_S,
+        patient: bool = True,
+        shared_channel: bool = False,
     ) -> None:
         self._lock = threading.Lock()
         self._seqs: dict[str, set[int]] = {}
@@ -41,6 +45,10 @@ class Arrivals:
         # robots bundle (stable links, `RobotOptions.bundle`), not where each submap leaves at
         # once because a contact may last a second.
         self.patient = patient
+        # On a channel the fleet shares, a robot paced to its share of the air sends its
+        # newest submaps first and the older ones behind, all heard by every robot in range:
+        # while it talks, whatever we lack of it is on its way, older or newer.
+        self.shared_channel = shared_channel
 
     def met(self, robot: str) -> None:
         """``robot`` joined: its quiet time starts now."""
@@ -102,11 +110,14 @@ class Arrivals:
         lies past the newest submap it sent us since it joined. A robot sends each of its
         submaps to every present peer in order, so on a slow link the rest is queued behind
         that one, and fetching it would send it twice. Never where not ``patient``: there a
-        robot that sent nothing newer more likely went out of reach."""
+        robot that sent nothing newer more likely went out of reach. On a shared channel
+        (``shared_channel``) all we lack of it is on its way while it talks."""
         with self._lock:
             latest = self._latest.get(robot)
             heard = self._heard.get(robot, -float("inf"))
             talking = robot not in self._silent and self._clock() <= heard + self._quiet_s
+            if self.shared_channel:
+                return talking
             return self.patient and talking and latest is not None and since > latest
 
     @property
