@@ -5,10 +5,12 @@ inside one network namespace whose loopback carries every robot's traffic, cappe
 them together by `tc tbf` (`gmmap.eval.links.channel`): the kernel enforces the budget and the
 bytes on the air are the interface's own count. Per robot count (3 and 5), channel rate
 (10 kB/s, 2 kB/s, 500 B/s, 250 B/s) and sharing (``broadcast``: submaps and adverts on a UDP
-multicast group, fetches unicast, `TransportOptions.broadcast`; ``unicast``: every message to
-every peer over its own Zenoh link, as without it):
+multicast group, fetches unicast, each robot within its share of the channel's rate:
+`TransportOptions.broadcast`, ``channel_rate``; ``unicast``: every message to every peer over
+its own Zenoh link, the default):
 
-- ``lost``: submaps built but never delivered to a peer (goal 0 at 500 B/s);
+- ``lost``: submaps built but never delivered to a peer (goal 0 at 500 B/s), ``delivered``:
+  submaps the robots received from their peers, fetched ones included;
 - ``all_held_after_s``: when every robot held every robot's submaps (None if never), and
   ``wall_s`` of the whole demo;
 - ``air_bytes``, ``air_bytes_per_submap`` (built) and its ratio to one submap's wire size
@@ -33,7 +35,7 @@ from gmmap.eval.fleetplots import completeness
 from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
 
 GROUP = "udp/224.0.0.224:7447"
-SHARING = {"unicast": [], "broadcast": ["--broadcast", GROUP]}
+SHARING = ("unicast", "broadcast")
 DEADLINE_S = 180.0
 
 
@@ -42,8 +44,10 @@ def case(robots: int, rate: float, sharing: str) -> dict:
     with SharedChannel(rate=rate) as air, tempfile.TemporaryDirectory() as out:
         argv = [
             gmmap, "demo", "--json", "--robots", str(robots), "--out", out, "--linger", "2",
-            "--deadline", str(DEADLINE_S), *SHARING[sharing],
+            "--deadline", str(DEADLINE_S),
         ]  # fmt: skip
+        if sharing == "broadcast":  # the channel's rate is what the fleet is configured with
+            argv += ["--broadcast", GROUP, "--channel-rate", str(rate)]
         before = air.bytes_sent()
         done = subprocess.run(air.command(argv), capture_output=True, text=True)
         on_air = air.bytes_sent() - before
@@ -56,6 +60,7 @@ def case(robots: int, rate: float, sharing: str) -> dict:
     wire = r["bytes_per_submap"]["wire"]
     return {
         "lost": lost,
+        "delivered": sum(r["received"].values()),
         "all_held_after_s": (
             round(max(t[-1] for t, _ in curves.values()), 1) if not lost else None
         ),

@@ -88,6 +88,11 @@ DESCRIPTIONS: dict[str, str] = {
     "CPU time, peak memory, and how accurate the kept matches, robot pairs and map frames are. "
     "Baseline: the bytes a point-cloud system would send for the same submaps (voxelised "
     "points as float32, the paper's Fig. 9).",
+    "channel": "The demo on one radio channel shared by the whole fleet (a namespace's "
+    "loopback capped by tc tbf for all robots together), 3 and 5 robots, 10 kB/s to 250 B/s: "
+    "submaps lost, time until every robot holds every submap, bytes on the air per submap "
+    "built. Baseline: the unicast mesh (each submap to each peer over its own Zenoh link) on "
+    "the same channel.",
     "planner": "Time per step of the GMM gradient-field planner on the paper's four scenes, "
     "and how it grows with the map's component count. Baseline: one full A* plan on a 5 cm "
     "grid of the same scans (`astar_over_gmm`: how many GMM steps one A* plan costs).",
@@ -241,6 +246,28 @@ SCOREBOARD: tuple[Row, ...] = (
         False,
         lower_is_better=True,
         unit=" B",
+    ),
+    Row(
+        "Bytes on a shared 2 kB/s channel per submap built",
+        "channel",
+        ("3_robots_2000_Bps_broadcast", "air_bytes_per_submap"),
+        "the unicast mesh",
+        ("3_robots_2000_Bps_unicast", "air_bytes_per_submap"),
+        "the demo office, 3 robots, one channel of 2 kB/s",
+        False,
+        lower_is_better=True,
+        unit=" B",
+        also=(("lost", ("3_robots_2000_Bps_broadcast", "lost")),),
+    ),
+    Row(
+        "Submaps delivered on a shared 500 B/s channel",
+        "channel",
+        ("3_robots_500_Bps_broadcast", "delivered"),
+        "the unicast mesh",
+        ("3_robots_500_Bps_unicast", "delivered"),
+        "the demo office, 3 robots, one channel of 500 B/s",
+        False,
+        also=(("lost", ("3_robots_500_Bps_broadcast", "lost")),),
     ),
     _sensors(("lidar16_3_robots",), "office, 16-beam LiDAR, 3 robots × seeds"),
     _sensors(("lidar360_2hz_3_robots",), "office, handheld 360° LiDAR 2 Hz, 3 robots × seeds"),

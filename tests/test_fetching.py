@@ -14,7 +14,15 @@ class Node(Fetcher):
     of late."""
 
     def __init__(
-        self, present, quiet, states=None, held=None, state=MAPPING, adverts=None, latest=None
+        self,
+        present,
+        quiet,
+        states=None,
+        held=None,
+        state=MAPPING,
+        adverts=None,
+        latest=None,
+        shared_channel=False,
     ):
         self.asked: list[tuple] = []
         self.answers: dict[str | None, list] = {}  # what a fetch via each robot returns
@@ -38,6 +46,7 @@ class Node(Fetcher):
                     on_its_way=lambda r, since: False,
                     latest=lambda r: (latest or {}).get(r, -1),
                     patient=False,
+                    shared_channel=shared_channel,
                     unanswered=lambda r, asked: False,
                 ),
                 holdings=SimpleNamespace(
@@ -59,6 +68,11 @@ class Node(Fetcher):
 
 def test_a_quiet_robot_is_asked_about_while_another_is_heard() -> None:
     assert Node(["b", "c"], quiet={"b"}).stalled() == ["b"]
+
+
+def test_on_a_shared_channel_no_one_is_asked_about_a_quiet_robot() -> None:
+    """It went quiet for every robot in range: no peer holds more of it to ask for."""
+    assert Node(["b", "c"], quiet={"b"}, shared_channel=True).stalled() == []
 
 
 def test_nothing_is_asked_when_no_one_is_heard_or_we_do_not_map() -> None:

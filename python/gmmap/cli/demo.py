@@ -231,8 +231,13 @@ def _robot_config(
         store=str(out / f"{name}.sqlite"),
         wait_for=tuple(names[j] for j in waits),
     )
-    zenoh = dict(config.transport.zenoh_options)
-    mode, listen = config.transport.mode, config.transport.listen
+    options = config.transport
+    if options.broadcast is not None and options.protocol is None:
+        # One shared channel: UDP links need no TCP handshakes, ACKs or retransmissions, which
+        # took a third of a 500 B/s channel (docs/benchmarks.md, "channel").
+        options = replace(options, protocol="udp")
+    zenoh = dict(options.zenoh_options)
+    mode, listen = options.mode, options.listen
     if config.link.topology == "router":  # a client of the router: it listens nowhere
         mode, listen, peers = "client", (), (relays[(i, len(names))].endpoint,)
     elif relays:
@@ -240,10 +245,12 @@ def _robot_config(
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
     else:
-        protocol = config.transport.link_protocol
-        peers = tuple(f"{protocol}/127.0.0.1:{p}" for j, p in enumerate(ports) if j != i)
+        # On a shared channel each pair's session opens once, from one side: every attempt
+        # costs air time all robots share.
+        dials = [j for j in linked if j < i] if options.broadcast is not None else linked
+        peers = tuple(f"{options.link_protocol}/127.0.0.1:{ports[j]}" for j in dials)
     transport = replace(
-        config.transport, mode=mode, listen=listen, port=ports[i], connect=peers,
+        options, mode=mode, listen=listen, port=ports[i], connect=peers,
         zenoh_options=zenoh,
     )  # fmt: skip
     return replace(config, robot=robot, transport=transport)

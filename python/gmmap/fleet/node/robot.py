@@ -82,6 +82,9 @@ log = logging.getLogger(__name__)
 META_FRAMES = "frames_consumed"
 META_CARRIED = "builder_state"  # `SubmapBuilder.state` after the robot's last submap
 STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held back
+# On a shared channel a peer counts as quiet after the air time of this many submaps of this
+# size at its share of the channel.
+QUIET_MESSAGES, SUBMAP_BYTES = 3, 1_000
 
 
 class RobotNode:
@@ -329,12 +332,18 @@ class RobotNode:
         robots = 1 + len(self.transport.peers())
         rate = air_share(self.config.transport.channel_rate, robots, self.config.robot.budget)
         self.budget.set_rate(rate)
+        if rate and self.arrivals.shared_channel:
+            # Paced to its share, a robot is quiet between messages as long as one takes.
+            quiet = max(quiet_for(self.config.robot), QUIET_MESSAGES * SUBMAP_BYTES / rate)
+            self.arrivals.quiet_s = quiet
 
     def _receive(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
         if not self.door.admit(robot, kind, seq, payload):
             return
         if self.shared.lossy:
             self.lingerer.heard_again(robot, seq if kind == KIND else None)
+        if self.arrivals.shared_channel:  # on the air: the robot itself talks to us
+            self.arrivals.hear(robot)
         if kind == KIND:
             if self.arrivals.add(robot, seq, direct=True):  # else a duplicate, or a replay
                 self._enqueue(Arrived("received", robot, seq, payload))

@@ -124,6 +124,11 @@ class Arrivals:
     def quiet_s(self) -> float:
         return self._quiet_s
 
+    @quiet_s.setter
+    def quiet_s(self, seconds: float) -> None:
+        with self._lock:
+            self._quiet_s = seconds
+
     def now(self) -> float:
         return self._clock()
 

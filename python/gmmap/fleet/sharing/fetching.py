@@ -157,7 +157,9 @@ class Fetcher:
         """While we map: the present robots still mapping, of which we hold something, that
         sent us nothing for a while although another present robot did."""
         shared = self.shared
-        if shared.state != holdings.MAPPING or shared.stopping:
+        # On a shared channel a robot that went quiet went quiet for all: no peer holds more
+        # of it, and each probe is a query to every peer on air time they all share.
+        if shared.state != holdings.MAPPING or shared.stopping or shared.arrivals.shared_channel:
             return []
         present = shared.transport.peers()
         quiet = shared.arrivals.quiet(present)
