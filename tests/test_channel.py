@@ -106,7 +106,14 @@ def test_a_robot_that_missed_a_broadcast_fetches_it_over_unicast(channel):
 
 @pytest.mark.parametrize(
     "group",
-    ["udp/10.0.0.1:7447", "tcp/224.0.0.224:7447", "udp/224.0.0.224", "multicast", GROUP + "#lo"],
+    [
+        "udp/10.0.0.1:7447",
+        "tcp/224.0.0.224:7447",
+        "udp/224.0.0.224",
+        "udp/[ff02::1]:7447",
+        "multicast",
+        GROUP + "#lo",
+    ],
 )
 def test_a_broadcast_group_must_be_udp_multicast(group):
     with pytest.raises(TransportConfigError, match="broadcast must be udp"):

@@ -101,15 +101,14 @@ def check_multicast(endpoint: str) -> str:
     proto, _, address = locator.partition("/")
     host, _, port = address.rpartition(":")
     try:
-        ok = proto == "udp" and ipaddress.ip_address(host).is_multicast and 0 < int(port) < 65536
+        ok = proto == "udp" and ipaddress.IPv4Address(host).is_multicast and 0 < int(port) < 65536
         ok = ok and (not suffix or (suffix.startswith("iface=") and len(suffix) > 6))
     except ValueError:
         ok = False
     if not ok:
         raise TransportConfigError(
-            f"broadcast must be udp/<multicast address>:<port>[#iface=<name>] "
-            f"(udp/224.0.0.224:7447); "
-            f"got {endpoint!r}"
+            "broadcast must be udp/<IPv4 multicast address>:<port>[#iface=<name>] "
+            f"(udp/224.0.0.224:7447); got {endpoint!r}"
         )
     return endpoint
 
