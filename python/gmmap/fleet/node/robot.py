@@ -95,7 +95,7 @@ class RobotNode:
     ``fetcher``, its adverts and ending its ``lingerer``; both work on what ``shared`` holds."""
 
     watch = False  # a station (`gmmap.fleet.node.station`) holds no liveliness token
-    tells = True  # and advertises nothing (`Lingerer.tells`)
+    tells = True  # whether it advertises what it holds (a station does not: `Lingerer.tells`)
 
     def __init__(self, config: Config, on_built: BuiltCallback | None = None) -> None:
         self.config = config
