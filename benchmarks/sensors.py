@@ -135,9 +135,9 @@ def totals(runs: list[dict]) -> dict:
     total = {k: sum(r[k] for r in runs) for k in ("pairs", "met", "joined", "wrong", "verified")}
     right = sum(round((r["precision"] or 0) * r["verified"]) for r in runs)
     total["precision"] = right / total["verified"] if total["verified"] else None
+    pairs = sum(r["no_guess"]["pairs"] for r in runs)
     for method in ("gmmap", "kiss_matcher"):
         done = [r["no_guess"][method] for r in runs if "right" in r["no_guess"][method]]
-        pairs = sum(r["no_guess"]["pairs"] for r in runs)
         total[f"no_guess_{method}"] = {
             "right": sum(d["right"] for d in done) if done else None,
             "pairs": pairs,

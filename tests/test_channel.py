@@ -49,9 +49,10 @@ with Transport(TransportConfig("air", name, options)) as t:
 
 
 @pytest.fixture
-def channel():
+def channel(request):
+    """A shared channel, capped at ``request.param`` B/s where a test parametrizes it."""
     try:
-        with SharedChannel() as air:
+        with SharedChannel(rate=getattr(request, "param", None)) as air:
             yield air
     except ChannelUnavailable as err:
         pytest.skip(f"no shared channel here: {err}")
@@ -130,25 +131,19 @@ def test_handshakes_wait_for_a_slow_channel():
     assert config.get_json("transport/unicast/open_timeout") == "30000"
 
 
-def test_a_fleet_on_a_500_bytes_per_second_channel_loses_nothing():
+@pytest.mark.parametrize("channel", [500], indirect=True)
+def test_a_fleet_on_a_500_bytes_per_second_channel_loses_nothing(channel):
     """Three robots, the demo's first 60 frames each, one channel of 500 B/s for all: every
     submap reaches every robot, and the whole run stays within the channel's rate."""
-    try:
-        air = SharedChannel(rate=500).__enter__()
-    except ChannelUnavailable as err:
-        pytest.skip(f"no shared channel here: {err}")
-    try:
-        gmmap = [sys.executable, "-c", "from gmmap.cli import main; main()"]
-        args = ["demo", "--json", "--max-frames", "60", "--linger", "2", "--broadcast", GROUP]
-        before = air.bytes_sent()
-        start = time.monotonic()
-        done = subprocess.run(
-            air.command([*gmmap, *args, "--channel-rate", "500"]),
-            capture_output=True, text=True, timeout=300,
-        )  # fmt: skip
-        seconds, on_air = time.monotonic() - start, air.bytes_sent() - before
-    finally:
-        air.close()
+    gmmap = [sys.executable, "-c", "from gmmap.cli import main; main()"]
+    args = ["demo", "--json", "--max-frames", "60", "--linger", "2", "--broadcast", GROUP]
+    before = channel.bytes_sent()
+    start = time.monotonic()
+    done = subprocess.run(
+        channel.command([*gmmap, *args, "--channel-rate", "500"]),
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    seconds, on_air = time.monotonic() - start, channel.bytes_sent() - before
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads(done.stdout)
     assert sum(report["lost"].values()) == 0, report["lost"]

@@ -81,7 +81,7 @@ class TransportOptions:
         if not isinstance(self.zenoh_options, Mapping):
             raise TransportConfigError("zenoh_options must be a mapping of key to value")
         if self.broadcast is not None:
-            check_multicast(self.broadcast)
+            multicast_group(self.broadcast)
         rate = self.channel_rate
         if rate is not None and not (
             isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0
@@ -94,15 +94,16 @@ class TransportOptions:
         return self.protocol or "tcp"
 
 
-def check_multicast(endpoint: str) -> str:
-    """``endpoint`` if it is ``udp/<IPv4 multicast address>:<port>[#iface=<name>]``, else
-    `TransportConfigError`."""
+def multicast_group(endpoint: str) -> tuple[str, int, str | None]:
+    """(address, port, interface name or None) of ``udp/<IPv4 multicast address>:<port>
+    [#iface=<name>]``; `TransportConfigError` for anything else."""
     locator, _, suffix = endpoint.partition("#") if isinstance(endpoint, str) else ("", "", "")
     proto, _, address = locator.partition("/")
     host, _, port = address.rpartition(":")
+    iface = suffix.removeprefix("iface=")
     try:
         ok = proto == "udp" and ipaddress.IPv4Address(host).is_multicast and 0 < int(port) < 65536
-        ok = ok and (not suffix or (suffix.startswith("iface=") and len(suffix) > 6))
+        ok = ok and (not suffix or (suffix.startswith("iface=") and bool(iface)))
     except ValueError:
         ok = False
     if not ok:
@@ -110,7 +111,7 @@ def check_multicast(endpoint: str) -> str:
             "broadcast must be udp/<IPv4 multicast address>:<port>[#iface=<name>] "
             f"(udp/224.0.0.224:7447); got {endpoint!r}"
         )
-    return endpoint
+    return host, int(port), iface or None
 
 
 def _endpoints(what: str, endpoints: Sequence[str] | str) -> tuple[str, ...]:

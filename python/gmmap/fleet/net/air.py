@@ -24,20 +24,13 @@ import threading
 from collections.abc import Callable
 
 from gmmap.errors import TransportError
+from gmmap.fleet_options import multicast_group
 
 log = logging.getLogger(__name__)
 
 MAGIC = b"GMA1"
 HEADER = struct.Struct(">4sH")
 MAX_DATAGRAM = 65_507  # bytes: IPv4's largest UDP payload
-
-
-def group_address(endpoint: str) -> tuple[str, int, str | None]:
-    """(address, port, interface name or None) of a checked ``udp/<group>:<port>[#iface=<name>]``
-    endpoint."""
-    locator, _, suffix = endpoint.partition("#")
-    host, _, port = locator.removeprefix("udp/").rpartition(":")
-    return host, int(port), suffix.removeprefix("iface=") or None
 
 
 def _mreqn(group: str, iface: str | None) -> bytes:
@@ -51,7 +44,7 @@ class Air:
     payload)`` runs on the receiving thread for every datagram heard, own ones included."""
 
     def __init__(self, endpoint: str, on_message: Callable[[str, bytes], None]) -> None:
-        host, port, iface = group_address(endpoint)
+        host, port, iface = multicast_group(endpoint)
         self.group = (host, port)
         self._on_message = on_message
         try:

@@ -151,7 +151,6 @@ class Transport(Querying):
         )
         # On a shared channel messages go on the air once (`TransportOptions.broadcast`).
         self._air: Air | None = None
-        self._hearing = False  # the broadcast is taken once someone subscribes, as a put is
         if config.options.broadcast is not None:
             try:
                 self._air = Air(config.options.broadcast, self._on_air)
@@ -239,7 +238,6 @@ class Transport(Querying):
             if self._data_subscriber is not None:
                 return
             # Declared lazily: before anyone listens, messages are not received nor counted.
-            self._hearing = True
             self._data_subscriber = self._session.declare_subscriber(
                 f"{PREFIX}/{self.fleet}/*/*/*",
                 self._on_sample,
@@ -276,7 +274,9 @@ class Transport(Querying):
         # this host must hear them): not "ignored", as a forged one with our name would be.
         parsed = parse_data_key(key)
         own = parsed is not None and parsed[:2] == (self.fleet, self.robot)
-        if self._hearing and not self._closed and not own:
+        # Taken once someone subscribes, as a put is.
+        hearing = self._data_subscriber is not None
+        if hearing and not self._closed and not own:
             self._take(key, parsed, payload)
 
     def _take(
