@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 export RUSTFLAGS ?= -C target-cpu=native
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 
-.PHONY: demo test install lint bench clean ros1 station
+.PHONY: demo test install lint bench clean ros1 ros2 station
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,7 @@ test: install
 # The layer rules (tests/test_layers.py) run with the tests.
 lint: install
 	cargo fmt --check
+	cd tools/ros2dds-bridge && cargo fmt --check
 	PYO3_PYTHON=$(abspath $(BIN)/python) cargo clippy --workspace --all-targets -- -D warnings
 	$(BIN)/ruff check python tests benchmarks
 	$(BIN)/ruff format --check python tests benchmarks
@@ -56,3 +57,17 @@ ros1:
 station:
 	$(SUDO) apt-get install -y --no-install-recommends chromium || \
 	  ($(SUDO) apt-get update && $(SUDO) apt-get install -y --no-install-recommends chromium)
+
+# ROS 2 against real DDS (tests/test_ros2dds.py): zenoh-plugin-ros2dds in a small host
+# (tools/ros2dds-bridge, its own workspace), built into a cache outside the clone keyed by the
+# plugin's version, so a second clone on this machine reuses it; CMake and libclang (for
+# CycloneDDS, which the plugin builds) from Debian; the cyclonedds package (the stand-in ROS 2
+# graph, gmmap.eval.ros2dds) into the venv.
+ROS2DDS_VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' tools/ros2dds-bridge/Cargo.toml)
+ROS2DDS_TARGET := $(HOME)/.cache/gmmap/ros2dds-bridge-$(ROS2DDS_VERSION)
+ros2: install
+	command -v cmake >/dev/null && [ -e /usr/lib/llvm-*/lib/libclang.so ] 2>/dev/null || \
+	  $(SUDO) apt-get install -y --no-install-recommends cmake libclang-dev || \
+	  ($(SUDO) apt-get update && $(SUDO) apt-get install -y --no-install-recommends cmake libclang-dev)
+	cd tools/ros2dds-bridge && RUSTFLAGS= CARGO_TARGET_DIR=$(ROS2DDS_TARGET) cargo build --release --locked
+	$(BIN)/python -m pip install --quiet "cyclonedds>=0.10"

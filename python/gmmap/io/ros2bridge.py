@@ -10,9 +10,9 @@ fleet's: ROS traffic never goes on the fleet's links, and the fleet's keys never
 In: sensor_msgs/PointCloud2 on ``cloud_topic``, or sensor_msgs/Image depth on ``depth_topic``
 with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on ``odom_topic``, or
 tf2_msgs/TFMessage on /tf and /tf_static: the chain from ``tf_parent`` down to ``tf_child``
-(`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is taken as it is published: a node
-that starts after the mountings were sent does not get them (rmw_zenoh's transient-local history
-was not followed here), so give those as ``ros.extrinsic``. A message that does not decode is
+(`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is transient local: rmw_zenoh and the
+bridge keep its last samples in a publication cache, which the node reads when it starts, so
+mountings sent before the node started reach it. A message that does not decode is
 counted and dropped. Subscriptions in rmw_zenoh's format take any type hash (a Humble publisher
 sends none) and check it where given. Out, every ``publish_every_s``: the group's merged map as
 a MarkerArray and as a sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a
@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 import zenoh
+import zenoh.ext
 
 from gmmap.errors import InvalidInputError, TransportError
 from gmmap.io import ros2
@@ -45,6 +46,7 @@ from gmmap.ros_options import RosOptions
 log = logging.getLogger(__name__)
 
 MAP_POINTS = 20_000  # points sampled from the merged map for points_topic
+TRANSIENT_LOCAL = {"/tf_static"}  # topics whose publishers serve late subscribers
 
 
 class Bridge:
@@ -202,7 +204,15 @@ class Ros2Bridge(Bridge):
                 log.debug("%s: dropped a ROS message: %s", self.robot, err)
 
         self._declare("MS", topic, typename, 100 if topic.startswith("/tf") else 10)
-        return self.session.declare_subscriber(self._key(topic, typename, True), on_sample)
+        key = self._key(topic, typename, True)
+        if topic in TRANSIENT_LOCAL:
+            # Both rmw_zenoh and the bridge keep a transient-local topic's last samples in a
+            # zenoh-ext publication cache: a history subscriber reads them on start.
+            history = zenoh.ext.HistoryConfig(detect_late_publishers=True)
+            return zenoh.ext.declare_advanced_subscriber(
+                self.session, key, on_sample, history=history
+            )
+        return self.session.declare_subscriber(key, on_sample)
 
     def _cloud(self, data: bytes) -> None:
         self._push(ros2.decode_pointcloud2(data, self.options.distro))
