@@ -17,7 +17,7 @@ its own Zenoh link, the default):
   (goal ≤ 1.2, however many robots hear it), with ``payload_bytes_per_submap``;
 - ``groups``: the demo's map groups at the end.
 
-Needs root, iproute2 and tc; skipped otherwise. 16 demos: 20-40 minutes on two cores.
+Needs root, iproute2 and tc; skipped otherwise. 16 demos: 30-60 minutes on two cores.
 
     .venv/bin/python benchmarks/channel.py [--robots 3,5] [--rates 10000,2000,500,250]
 """
@@ -36,7 +36,7 @@ from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
 
 GROUP = "udp/224.0.0.224:7447"
 SHARING = ("unicast", "broadcast")
-DEADLINE_S = 180.0
+DEADLINE_S = 300.0  # five robots need ~240 s at 500 B/s
 
 
 def case(robots: int, rate: float, sharing: str) -> dict:
