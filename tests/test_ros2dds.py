@@ -20,6 +20,7 @@ from gmmap.eval.ros2dds.bridge import missing
 from gmmap.fleet.net.transport import free_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
+from gmmap.io.ros2bridge import MAP_POINTS, Ros2Bridge
 from gmmap.options import BuildOptions, RobotOptions, RosOptions
 
 pytestmark = pytest.mark.skipif(missing() is not None, reason=str(missing()))
@@ -36,10 +37,8 @@ def domain() -> int:
 
 
 def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_path):
-    from gmmap.io.ros2bridge import Ros2Bridge
-
     port, dds = free_port(), domain()
-    heard: dict[str, list] = {"map": [], "status": []}
+    heard: dict[str, list] = {"map": [], "status": [], "points": []}
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:4]
     with (
         RosDdsBridge(dds, f"tcp/127.0.0.1:{port}"),
@@ -61,6 +60,7 @@ def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_pat
             bridge.attach(node)
             viewer.subscription("/gmmap/map", m.MarkerArray, callback=heard["map"].append)
             viewer.subscription("/gmmap/status", m.String, callback=heard["status"].append)
+            viewer.subscription("/gmmap/map_points", m.PointCloud2, callback=heard["points"].append)
             clouds = sensor.publisher("/points", m.PointCloud2, graph.SENSOR_DATA)
             odom = sensor.publisher("/odom", m.Odometry)
             assert graph.matched(clouds) and graph.matched(odom), "the bridge made no route"
@@ -91,6 +91,9 @@ def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_pat
             assert np.allclose(
                 np.sort(means, axis=0), np.sort(node.global_map().gmm.means, axis=0), atol=1e-4
             )
+            cloud = heard["points"][-1]  # the merged map sampled, in the reference's frame
+            assert cloud.width == MAP_POINTS and cloud.header.frame_id == "a/map"
+            assert [f.name for f in cloud.fields][:3] == ["x", "y", "z"]
         finally:
             bridge.close()
             builder.join(timeout=10)
@@ -102,8 +105,6 @@ def test_a_mounting_sent_before_the_node_started_reaches_it_from_the_bridges_cac
     keeps its samples for a route the bridge opens later, and the bridge's publication cache
     for a subscriber that comes after that; so clouds in the camera frame are posed with a
     mounting published before the node started."""
-    from gmmap.io.ros2bridge import Ros2Bridge
-
     port, dds = free_port(), domain()
     mount = np.eye(4)
     mount[:3, 3] = [0.1, 0.0, 0.5]
@@ -142,8 +143,6 @@ def test_malformed_dds_samples_are_counted_and_mapping_goes_on():
     """A cloud whose data is shorter than its header says and one without x, y, z are
     rejected and counted; the good clouds around them become frames. (A String published on
     the clouds' topic never reaches the node: the bridge routes one type per topic.)"""
-    from gmmap.io.ros2bridge import Ros2Bridge
-
     port, dds = free_port(), domain()
     with (
         RosDdsBridge(dds, f"tcp/127.0.0.1:{port}"),
