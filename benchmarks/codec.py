@@ -5,9 +5,10 @@ Prints one JSON object. The submaps and pairs are the Table I harness' own
 benchmarks/registration.py, 5-frame Point-to-GMM submaps, full covariances, consecutive pairs
 from the identity). Every submap goes through ``gmmap.encode`` and ``gmmap.decode``; reported:
 
-- bytes per submap (mean, max, per 100 components) against the mixture as float32 (4 bytes per
-  weight, mean and covariance entry), the paper's 5,099-byte message, and the voxelised point
-  cloud as float32 (12 bytes per point, what a point-based system would send);
+- bytes per submap (mean, max, per 100 components, and submap by submap in ``series``) against
+  the mixture as float32 (4 bytes per weight, mean and covariance entry), the paper's
+  5,099-byte message, and the voxelised point cloud as float32 (12 bytes per point, what a
+  point-based system would send);
 - Table I (t/r error mean and RMSE, success rate) of Point-to-GMM registration on the same
   pairs with the float64 mixtures and with the decoded ones, and the relative change; also the
   change over the pairs float64 registers successfully and the mean per-pair change, which a
@@ -107,6 +108,12 @@ def size_figures(submaps: dict[int, Submap], messages: dict[int, bytes]) -> dict
         "reduction_vs_float32_points": float((cloud / size).mean()),
         "zstd_chosen": int(sum(messages[s][6] == 1 for s in seqs)),
         "kind_submap": all(messages[s][5] == KIND_SUBMAP for s in seqs),
+        # Submap by submap, in the order built: the paper's Fig. 9.
+        "series": {
+            "bytes": size.astype(int).tolist(),
+            "float32_gmm_bytes": f32.astype(int).tolist(),
+            "float32_points_bytes": cloud.astype(int).tolist(),
+        },
     }
 
 

@@ -4,9 +4,9 @@
 every bench-<name>.json it read, and links the PNGs it gets back right after the scoreboard.
 Each plot is drawn only when its JSON and keys are there:
 
-- bytes per submap by representation, as the paper's Fig. 9 (``codec``: the voxelised point
-  cloud as float32, the mixture as float32, the paper's 5,099-byte message, gmmap's encoded
-  submap);
+- bytes per submap, submap by submap as the paper's Fig. 9, and their means by representation
+  (``codec``: the voxelised point cloud as float32, the mixture as float32, the paper's
+  5,099-byte message, gmmap's encoded submap);
 - bytes each robot sends against what a point-cloud system would send, by fleet size
   (``fleet``);
 - registration error, mean and median, against GICP on every data set both ran on
@@ -68,7 +68,7 @@ def bars(
 
 
 def bytes_per_submap(benches: dict[str, Any], folder: Path) -> Path | None:
-    """The paper's Fig. 9 as bars: bytes per submap by representation (codec)."""
+    """Bytes per submap by representation, means as bars (codec)."""
     size = get(benches.get("codec"), "size")
     found = {
         "point cloud\n(float32)": num(get(size, "float32_points_bytes_mean")),
@@ -85,6 +85,32 @@ def bytes_per_submap(benches: dict[str, Any], folder: Path) -> Path | None:
         ax.annotate(f"{v:,.0f} B", (x, v), ha="center", va="bottom", fontsize=8)
     ax.set(yscale="log", ylabel="bytes per submap (mean, log)", title="Bytes per submap")
     return save(fig, folder / "bytes_per_submap.png")
+
+
+def bytes_over_time(benches: dict[str, Any], folder: Path) -> Path | None:
+    """The paper's Fig. 9: each submap's bytes in the order built, by representation (codec)."""
+    series = get(benches.get("codec"), "size", "series")
+    lines = {
+        "point cloud (float32)": ("float32_points_bytes", "0.6"),
+        "GMM (float32)": ("float32_gmm_bytes", "C1"),
+        "gmmap (encoded)": ("bytes", "C0"),
+    }
+    found = {k: (get(series, key), color) for k, (key, color) in lines.items()}
+    found = {k: (v, c) for k, (v, c) in found.items() if isinstance(v, list) and v}
+    if "gmmap (encoded)" not in found:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    for label, (values, color) in found.items():
+        mean = sum(values) / len(values)
+        ax.plot(range(1, len(values) + 1), values, color=color, label=f"{label}: {mean:,.0f} B")
+    ax.axhline(
+        PAPER_BYTES, color="C3", ls="--", lw=1, label=f"the paper's message: {PAPER_BYTES:,} B"
+    )
+    data = get(benches.get("codec"), "data")
+    title = "Bytes per submap" + (f", {data.split(',')[0]}" if isinstance(data, str) else "")
+    ax.set(yscale="log", xlabel="submap, in the order built", ylabel="bytes (log)", title=title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
+    return save(fig, folder / "bytes_over_time.png")
 
 
 def fleet_bytes(benches: dict[str, Any], folder: Path) -> Path | None:
@@ -199,7 +225,11 @@ def place_recall(benches: dict[str, Any], folder: Path) -> Path | None:
 
 
 PLOTS: tuple[tuple[str, Callable[[dict[str, Any], Path], Path | None]], ...] = (
-    ("Bytes per submap by representation (codec; the paper's Fig. 9)", bytes_per_submap),
+    (
+        "Bytes per submap over a recording, by representation (codec; the paper's Fig. 9)",
+        bytes_over_time,
+    ),
+    ("Bytes per submap by representation, means (codec)", bytes_per_submap),
     ("Bytes sent per robot against point clouds, by fleet size (fleet)", fleet_bytes),
     ("Registration error against GICP, mean and median (registration)", registration_errors),
     ("Place recognition recall, GMMs against raw points (place)", place_recall),

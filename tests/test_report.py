@@ -28,6 +28,11 @@ CODEC = {
         "bytes_mean": 800.0,
         "float32_gmm_bytes_mean": 3800.0,
         "float32_points_bytes_mean": 24000.0,
+        "series": {
+            "bytes": [780, 820, 800],
+            "float32_gmm_bytes": [3700, 3900, 3800],
+            "float32_points_bytes": [20000, 28000, 24000],
+        },
     }
 }
 # TUM only: the KITTI rows must say "not run".
@@ -164,7 +169,8 @@ def test_plots_are_written_for_the_fixture(tmp_path):
         check=True,
         capture_output=True,
     )
-    names = ("bytes_per_submap", "fleet_bytes", "registration_errors", "place_recall")
+    names = ("bytes_over_time", "bytes_per_submap", "fleet_bytes", "registration_errors",
+             "place_recall")  # fmt: skip
     for name in names:
         png = tmp_path / "docs" / "benchmarks" / f"{name}.png"
         assert png.read_bytes().startswith(b"\x89PNG"), name
