@@ -11,8 +11,10 @@ its own Zenoh link, the default):
 
 - ``lost``: submaps built but never delivered to a peer (goal 0 at 500 B/s), ``delivered``:
   submaps the robots received from their peers, fetched ones included;
-- ``all_held_after_s``: when every robot held every robot's submaps (None if never), and
-  ``wall_s`` of the whole demo;
+- ``all_held_after_s``: when every robot held every robot's submaps (None if never),
+  ``first_heard_after_s``: when the last robot to receive a peer's submap received its first
+  (set-up cost: connected and receiving), both from the fleet's first submap, and ``wall_s``
+  of the whole demo;
 - ``air_bytes``, ``air_bytes_per_submap`` (built) and its ratio to one submap's wire size
   (goal ≤ 1.2, however many robots hear it), with ``payload_bytes_per_submap``;
 - ``groups``: the demo's map groups at the end.
@@ -33,6 +35,7 @@ from pathlib import Path
 
 from gmmap.eval.fleetplots import completeness
 from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
+from gmmap.fleet.storage.store import Store
 
 GROUP = "udp/224.0.0.224:7447"
 SHARING = ("unicast", "broadcast")
@@ -56,6 +59,7 @@ def case(robots: int, rate: float, sharing: str) -> dict:
         r = json.loads(done.stdout)
         stores = {n: Path(out) / f"{n}.sqlite" for n in r["received"]}
         curves = completeness(stores)
+        first = first_heard(list(stores.values()))
     lost = sum(r["lost"].values())
     wire = r["bytes_per_submap"]["wire"]
     return {
@@ -64,6 +68,7 @@ def case(robots: int, rate: float, sharing: str) -> dict:
         "all_held_after_s": (
             round(max(t[-1] for t, _ in curves.values()), 1) if not lost else None
         ),
+        "first_heard_after_s": first,
         "wall_s": round(r["wall_s"], 1),
         "air_bytes": on_air,
         "submaps": r["submaps"],
@@ -72,6 +77,21 @@ def case(robots: int, rate: float, sharing: str) -> dict:
         "payload_bytes_per_submap": wire,
         "groups": len(r["groups"]),
     }
+
+
+def first_heard(stores: list[Path]) -> float | None:
+    """Seconds from the fleet's first submap until the last robot to hear a peer's submap
+    heard its first: how soon every robot is connected and receiving (None if one never is)."""
+    own, heard = [], []
+    for path in stores:
+        with Store(path, durable=False) as store:
+            records = store.submaps()
+        own += [r.received for r in records if r.own]
+        peers = [r.received for r in records if not r.own]
+        heard.append(min(peers) if peers else None)
+    if not own or None in heard:
+        return None
+    return round(max(heard) - min(own), 1)
 
 
 def main() -> None:
