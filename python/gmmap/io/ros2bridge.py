@@ -10,9 +10,11 @@ fleet's: ROS traffic never goes on the fleet's links, and the fleet's keys never
 In: sensor_msgs/PointCloud2 on ``cloud_topic``, or sensor_msgs/Image depth on ``depth_topic``
 with its CameraInfo, → `LiveInput.push_frame`; nav_msgs/Odometry on ``odom_topic``, or
 tf2_msgs/TFMessage on /tf and /tf_static: the chain from ``tf_parent`` down to ``tf_child``
-(`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is transient local: rmw_zenoh and the
-bridge keep its last samples in a publication cache, which the node reads when it starts, so
-mountings sent before the node started reach it. A message that does not decode is
+(`gmmap.io.tfchain`), → `LiveInput.push_pose`. /tf_static is transient local: the bridge keeps
+its last samples in a zenoh-ext publication cache (an AdvancedPublisher), which the node's
+history subscriber reads when it starts, so mountings sent before the node started reach it
+(tested against the real bridge; against rmw_zenoh's caching, not: there, give such mountings
+as ``ros.extrinsic``). A message that does not decode is
 counted and dropped. Subscriptions in rmw_zenoh's format take any type hash (a Humble publisher
 sends none) and check it where given. Out, every ``publish_every_s``: the group's merged map as
 a MarkerArray and as a sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a
@@ -206,8 +208,8 @@ class Ros2Bridge(Bridge):
         self._declare("MS", topic, typename, 100 if topic.startswith("/tf") else 10)
         key = self._key(topic, typename, True)
         if topic in TRANSIENT_LOCAL:
-            # Both rmw_zenoh and the bridge keep a transient-local topic's last samples in a
-            # zenoh-ext publication cache: a history subscriber reads them on start.
+            # The bridge keeps a transient-local topic's last samples in a zenoh-ext
+            # publication cache: a history subscriber reads them when it starts.
             history = zenoh.ext.HistoryConfig(detect_late_publishers=True)
             return zenoh.ext.declare_advanced_subscriber(
                 self.session, key, on_sample, history=history
