@@ -12,8 +12,17 @@ import time
 from pathlib import Path
 
 from gmmap.errors import TransportError
-from gmmap.eval.ros2dds.graph import LOCALHOST
 
+# CycloneDDS on loopback only (no multicast, localhost the one peer): the bridge and the
+# stand-in nodes both, so tests never reach past the machine.
+LOCALHOST = (
+    '<CycloneDDS><Domain id="any"><General>'
+    '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General>"
+    "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+    '<Peers><Peer address="localhost"/></Peers></Discovery></Domain></CycloneDDS>'
+)
 PLUGIN_VERSION = "1.10.2"  # tools/ros2dds-bridge/Cargo.toml; the cache is keyed by it
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gmmap"
 BINARY = Path(

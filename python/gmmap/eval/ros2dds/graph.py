@@ -31,16 +31,8 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from gmmap.eval.ros2dds import messages as m
+from gmmap.eval.ros2dds.bridge import LOCALHOST
 from gmmap.math.geometry import matrix_to_quaternion
-
-LOCALHOST = (
-    '<CycloneDDS><Domain id="any"><General>'
-    '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
-    "<AllowMulticast>false</AllowMulticast></General>"
-    "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-    "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
-    '<Peers><Peer address="localhost"/></Peers></Discovery></Domain></CycloneDDS>'
-)
 
 SENSOR_DATA = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
 DEFAULT = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10))
