@@ -19,9 +19,10 @@ counted and dropped. Subscriptions in rmw_zenoh's format take any type hash (a H
 sends none) and check it where given. Out, every ``publish_every_s``: the group's merged map as
 a MarkerArray and as a sampled PointCloud2, the TF tree (`TfGraph`: a spanning tree, never a
 loop) and the status. In rmw_zenoh's format the node, its subscriptions and publishers hold
-rmw_zenoh's liveliness tokens (`ros2keys.liveliness_token`), so ROS 2 tools list them. What a
-running ROS 2 graph would show of these was not tested here: the formats were, against rosbags'
-serialisation and type hashes.
+rmw_zenoh's liveliness tokens (`ros2keys.liveliness_token`), so ROS 2 tools list them. The
+bridge format is tested against the real zenoh-bridge-ros2dds and CycloneDDS
+(tests/test_ros2dds.py); the rmw_zenoh format only against rosbags' serialisation and type
+hashes and rmw_zenoh's design document.
 """
 
 from __future__ import annotations
