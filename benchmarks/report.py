@@ -269,6 +269,26 @@ SCOREBOARD: tuple[Row, ...] = (
         False,
         also=(("lost", ("3_robots_500_Bps_broadcast", "lost")),),
     ),
+    Row(
+        "Submaps delivered on a shared 500 B/s channel",
+        "channel",
+        ("5_robots_500_Bps_broadcast", "delivered"),
+        "the unicast mesh",
+        ("5_robots_500_Bps_unicast", "delivered"),
+        "the demo office, 5 robots, one channel of 500 B/s",
+        False,
+        also=(("lost", ("5_robots_500_Bps_broadcast", "lost")),),
+    ),
+    Row(
+        "Depth frames mapped through the real ROS 2 DDS bridge",
+        "ros2",
+        ("depth_image_30hz", "ros2", "mapped"),
+        "frames published",
+        ("depth_image_30hz", "ros2", "published"),
+        "TUM fr1_xyz depth images at 30 Hz, CycloneDDS → zenoh-bridge-ros2dds",
+        True,
+        also=(("latency median s", ("depth_image_30hz", "ros2", "latency_median_s")),),
+    ),
     _sensors(("lidar16_3_robots",), "office, 16-beam LiDAR, 3 robots × seeds"),
     _sensors(("lidar360_2hz_3_robots",), "office, handheld 360° LiDAR 2 Hz, 3 robots × seeds"),
     _sensors(("lidar360_10hz_3_robots",), "office, handheld 360° LiDAR 10 Hz, 3 robots × seeds"),
@@ -489,7 +509,7 @@ def options(name: str) -> str:
 
 def names(root: Path) -> list[str]:
     """The known benchmarks in order, then any other script or JSON output found."""
-    found = {p.stem for p in (ROOT / "benchmarks").glob("*.py") if p.stem != "report"}
+    found = {p.stem for p in (ROOT / "benchmarks").glob("*.py")} - {"report", "plots"}
     found |= {p.stem.removeprefix("bench-") for p in root.glob("bench-*.json")}
     return [*ORDER, *sorted(found - set(ORDER))]
 
