@@ -9,8 +9,8 @@ Each plot is drawn only when its JSON and keys are there:
   5,099-byte message, gmmap's encoded submap);
 - bytes each robot sends against what a point-cloud system would send, by fleet size
   (``fleet``);
-- registration error, mean and median, against GICP on every data set both ran on
-  (``registration``);
+- registration error distributions (percentiles and mean) against GICP on every data set
+  both ran on (``registration``);
 - place recognition: recall@N curves when the JSON has the ``recall_at_n`` lists, else
   recall@1 and recall@top-1 %, on GMMs against raw points, per place set (``place``).
 
@@ -142,35 +142,49 @@ def fleet_bytes(benches: dict[str, Any], folder: Path) -> Path | None:
 
 
 def registration_errors(benches: dict[str, Any], folder: Path) -> Path | None:
-    """Translation and rotation error, mean and median, Point-to-GMM against GICP."""
+    """Translation and rotation error distributions, Point-to-GMM against GICP on the same
+    pairs: boxes from the 25th to the 75th percentile, whiskers at the 5th and 95th, a line at
+    the median and a dot at the mean."""
     data = benches.get("registration")
     if not isinstance(data, dict):
         return None
+
+    def quantiles(k: str, m: str, e: str) -> list[float] | None:
+        q = get(data[k], "methods", m, f"{e}_error_quantiles")
+        ok = isinstance(q, list) and len(q) == 5 and all(num(v) is not None for v in q)
+        return [float(v) for v in q] if ok else None
+
     sets = [
         k
         for k, v in data.items()
-        if all(
-            num(get(v, "methods", m, f"{e}_error_{s}")) is not None
-            for m in ("points", "gicp")
-            for e in ("t", "r")
-            for s in ("mean", "median")
-        )
+        if all(quantiles(k, m, e) for m in ("points", "gicp") for e in ("t", "r"))
     ]
     if not sets:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    methods = (("points", "gmmap", "C0"), ("gicp", "GICP", "C1"))
     for ax, (e, unit, scale) in zip(axes, (("t", "mm", 1000.0), ("r", "°", 1.0)), strict=True):
-        series = {}
-        for m, name in (("points", "gmmap"), ("gicp", "GICP")):
-            for s in ("mean", "median"):
-                values = [num(get(data[k], "methods", m, f"{e}_error_{s}")) for k in sets]
-                # Log scale: a zero (e.g. a median of exact rotations) has no bar.
-                series[f"{name}, {s}"] = [(v or math.nan) * scale for v in values]
-        bars(ax, sets, series, ["C0", "#9ecae1", "C1", "#fdd0a2"])
+        for i, (m, name, color) in enumerate(methods):
+            stats = []
+            for k in sets:
+                lo, q1, med, q3, hi = (max(v * scale, 1e-4) for v in quantiles(k, m, e))
+                mean = num(get(data[k], "methods", m, f"{e}_error_mean"))
+                stats.append({"whislo": lo, "q1": q1, "med": med, "q3": q3, "whishi": hi,
+                              "mean": max((mean or 0.0) * scale, 1e-4), "label": k})  # fmt: skip
+            boxes = ax.bxp(
+                stats, positions=[g + (i - 0.5) * 0.38 for g in range(len(sets))], widths=0.32,
+                showfliers=False, showmeans=True, patch_artist=True,
+                meanprops={"marker": "o", "markersize": 3, "markerfacecolor": "k"},
+                medianprops={"color": "k"},
+            )  # fmt: skip
+            for box in boxes["boxes"]:
+                box.set(facecolor=color, alpha=0.6)
+            boxes["boxes"][0].set_label(name)
+        ax.set_xticks(range(len(sets)), sets, rotation=20, ha="right")
         what = "translation" if e == "t" else "rotation"
         ax.set(yscale="log", ylabel=f"{what} error ({unit}, log)", title=f"{what} error")
     axes[0].legend(fontsize=8)
-    fig.suptitle("Registration against GICP, same pairs")
+    fig.suptitle("Registration against GICP, same pairs (5-25-50-75-95th percentiles, mean)")
     return save(fig, folder / "registration_errors.png")
 
 
@@ -231,7 +245,7 @@ PLOTS: tuple[tuple[str, Callable[[dict[str, Any], Path], Path | None]], ...] = (
     ),
     ("Bytes per submap by representation, means (codec)", bytes_per_submap),
     ("Bytes sent per robot against point clouds, by fleet size (fleet)", fleet_bytes),
-    ("Registration error against GICP, mean and median (registration)", registration_errors),
+    ("Registration error distributions against GICP (registration)", registration_errors),
     ("Place recognition recall, GMMs against raw points (place)", place_recall),
 )
 

@@ -45,6 +45,8 @@ REGISTRATION = {
                 "r_error_mean": 0.5,
                 "r_error_median": 0.0,
                 "time_per_pair_s": s,
+                "t_error_quantiles": [t / 4, t / 3, t / 2, t, 2 * t],
+                "r_error_quantiles": [0.0, 0.0, 0.0, 0.5, 1.0],
             }
             for name, t, s in (("points", 0.006, 0.002), ("gicp", 0.008, 0.010))
         }

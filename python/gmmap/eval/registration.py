@@ -193,6 +193,9 @@ def run_method(
     return r.transform, time.perf_counter() - start, r.confidence
 
 
+QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+
+
 def summarise(
     errors: list[tuple[float, float]],
     times: list[float],
@@ -211,6 +214,9 @@ def summarise(
         "r_rmse": float(np.sqrt((e[:, 1] ** 2).mean())),
         "success_rate": float(ok.mean()),
         "time_per_pair_s": float(np.mean(times)),
+        # The distributions, for plots: errors at QUANTILES.
+        "t_error_quantiles": np.quantile(e[:, 0], QUANTILES).tolist(),
+        "r_error_quantiles": np.quantile(e[:, 1], QUANTILES).tolist(),
     }
     if confidences and all(c is not None for c in confidences):
         c = np.array(confidences, dtype=float)
