@@ -132,12 +132,16 @@ def test_eval_registration_command_prints_table_one(tmp_path):
         "r_rmse",
         "success_rate",
         "time_per_pair_s",
+        "t_error_quantiles",
+        "r_error_quantiles",
     }
     assert set(out["methods"]) == {"points", "gmm-merge", "per-frame", "gicp"}
     gmm_keys = keys | {"confidence_failed_max", "confidence_succeeded_min"}
     for name, m in out["methods"].items():
         assert set(m) == (keys if name == "gicp" else gmm_keys)
         assert 0.0 <= m["success_rate"] <= 1.0
+        q = m["t_error_quantiles"]  # 5th … 95th percentiles, the median among them
+        assert len(q) == 5 and q == sorted(q) and np.isclose(q[2], m["t_error_median"])
     # The slice's frames are 1.3 s apart (up to 20 cm): errors stay well under that motion.
     assert all(m["t_error_mean"] < 0.3 for m in out["methods"].values())
 
