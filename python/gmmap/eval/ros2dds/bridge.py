@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import subprocess
 import time
 from pathlib import Path
@@ -63,31 +62,32 @@ class RosDdsBridge:
             },
         }
         folder.mkdir(parents=True, exist_ok=True)
-        self.config = folder / f"ros2dds-bridge-{os.getpid()}-{domain}.json5"
+        name = f"ros2dds-bridge-{os.getpid()}-{domain}"
+        self.config, self.log = folder / f"{name}.json5", folder / f"{name}.log"
         self.config.write_text(json.dumps(config))
         env = {
             **os.environ,
             "CYCLONEDDS_URI": LOCALHOST,
             "RUST_LOG": os.environ.get("RUST_LOG", "warn"),
         }
-        self.process = subprocess.Popen(
-            [str(BINARY), str(self.config)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            env=env,
-            text=True,
-        )
+        # Its output goes to a file, not a pipe: a pipe nobody reads would stop the bridge
+        # once its logs filled it.
+        with open(self.log, "wb") as out:
+            self.process = subprocess.Popen(
+                [str(BINARY), str(self.config)], stdout=out, stderr=subprocess.STDOUT, env=env
+            )
         self._ready(timeout=60.0)
 
     def _ready(self, timeout: float) -> None:
+        """Waits for the host's "ready" line (it prints it once the runtime has started)."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            if self.process.poll() is not None:
-                err = self.process.stderr.read() if self.process.stderr else ""
-                raise TransportError(f"the ROS 2 DDS bridge exited: {err.strip()[-2000:]}")
-            ready, _, _ = select.select([self.process.stdout], [], [], 0.2)
-            if ready and self.process.stdout.readline().strip() == "ready":
+            lines = self.log.read_text(errors="replace").splitlines()
+            if "ready" in (line.strip() for line in lines):
                 return
+            if self.process.poll() is not None:
+                raise TransportError(f"the ROS 2 DDS bridge exited: {' | '.join(lines[-20:])}")
+            time.sleep(0.1)
         self.close()
         raise TransportError(f"the ROS 2 DDS bridge did not start within {timeout:.0f} s")
 
@@ -100,6 +100,7 @@ class RosDdsBridge:
                 self.process.kill()
                 self.process.wait()
         self.config.unlink(missing_ok=True)
+        self.log.unlink(missing_ok=True)
 
     def __enter__(self) -> RosDdsBridge:
         return self
