@@ -51,6 +51,8 @@ def summary(result: dict) -> dict:
         "submaps": result["submaps"],
         "recall_at_1": {k: result[k]["recall_at_n"][0] for k in ("gmm", "points")},
         "recall_at_1pct": {k: result[k]["recall_at_1pct"] for k in ("gmm", "points")},
+        # Recall@N for N = 1 … 25: the curves of docs/benchmarks.md.
+        "recall_at_n": {k: result[k]["recall_at_n"][:25] for k in ("gmm", "points")},
         "verified_at_full_precision": verified,
         "query_time_s": result["query_time_s"],
         "describe_time_s": result["describe_time_s"],
