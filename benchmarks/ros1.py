@@ -87,10 +87,15 @@ def _image(mm: np.ndarray) -> SimpleNamespace:
                            data=mm.astype("<u2").tobytes())  # fmt: skip
 
 
-def lidar_input(tmp: Path, n: int) -> tuple[Path, list, RosOptions]:
+def lidar_frames(n: int) -> list:
+    """The first ``n`` scans of a simulated 16-beam LiDAR at 10 Hz."""
     base = Config()
     run = simulate_options(replace(base.sim, sensor="lidar", width=320, robots=1, rate=10.0))[0]
-    frames = [run[i] for i in range(min(n, len(run)))]
+    return [run[i] for i in range(min(n, len(run)))]
+
+
+def lidar_input(tmp: Path, n: int) -> tuple[Path, list, RosOptions]:
+    frames = lidar_frames(n)
     bag = write_cloud_bag(tmp / "lidar.bag", {"": frames})
     return bag, frames, RosOptions(cloud_topic="/camera/depth/points", odom_topic="/odom")
 

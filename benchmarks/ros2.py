@@ -33,22 +33,17 @@ from pathlib import Path
 
 import numpy as np
 from live import cpu_seconds, node  # benchmarks/live.py: this script's folder is on the path
+from ros1 import MOUNT, STRIDE, TUM, _image, lidar_frames, recorded_run, submap_bytes
 
-from gmmap.config import Config
 from gmmap.eval.ros2dds.bridge import missing
 from gmmap.fleet.net.transport import free_port
 from gmmap.io.datasets import TumRgbd
 from gmmap.io.datasets.tum import read_depth
 from gmmap.io.ros2msgs import Camera, depth_points
-from gmmap.io.sim import simulate_options
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.live import LiveInput
-from gmmap.math.geometry import make_poses
 from gmmap.options import RosOptions
 
-TUM = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "tum_fr1_xyz"
-STRIDE = 4  # the depth pixels kept, both ways (RosOptions.depth_stride's default)
-MOUNT = make_poses(np.array([[0.1, 0.0, 0.3]]), np.array([[0.0, 0.0, 0.7071068, 0.7071068]]))[0]
 PUBLISH_EVERY_S = 0.2  # the node's outputs: often, so the latency is the pipeline's
 
 
@@ -65,22 +60,12 @@ def depth_frames(n: int) -> tuple[list, list, RosOptions]:
     return list(zip(data.stamps[:k], data.poses[:k], mm, strict=True)), frames, options
 
 
-def _image(mm: np.ndarray):
-    from types import SimpleNamespace
-
-    h, w = mm.shape
-    return SimpleNamespace(width=w, height=h, encoding="16UC1", is_bigendian=0, step=2 * w,
-                           data=mm.astype("<u2").tobytes())  # fmt: skip
-
-
-def lidar_frames(n: int) -> tuple[list, list, RosOptions]:
-    base = Config()
-    run = simulate_options(replace(base.sim, sensor="lidar", width=320, robots=1, rate=10.0))[0]
-    frames = [run[i] for i in range(min(n, len(run)))]
+def lidar_input(n: int) -> tuple[list, list, RosOptions]:
+    frames = lidar_frames(n)
     return frames, frames, RosOptions(cloud_topic="/points", odom_topic="/odom")
 
 
-INPUTS = {"depth_image_30hz": (depth_frames, 30.0), "pointcloud2_lidar_10hz": (lidar_frames, 10.0)}
+INPUTS = {"depth_image_30hz": (depth_frames, 30.0), "pointcloud2_lidar_10hz": (lidar_input, 10.0)}
 
 
 def publish(name: str, n: int, domain: int, go, sent) -> None:
@@ -216,24 +201,6 @@ def latencies(frames: list, built: list, maps: list, robot) -> dict:
         "latency_median_s": float(np.median(out)) if out else None,
         "latency_max_s": float(np.max(out)) if out else None,
     }
-
-
-def submap_bytes(n) -> int:
-    """The bytes of the submaps built, as sent (sealed payloads)."""
-    return sum(int(w["wire"]) for w in n.wire.values())
-
-
-def recorded_run(tmp: Path, frames: list) -> dict:
-    n = node(tmp, "recorded")
-    n.start()
-    cpu = cpu_seconds()
-    n.start_frames(frames).join()
-    cpu = cpu_seconds() - cpu
-    built = n.counts["built"]
-    out = {"frames": len(frames), "cpu_s_per_frame": cpu / len(frames), "submaps": built,
-           "bytes_per_submap": submap_bytes(n) / max(1, built)}  # fmt: skip
-    n.stop()
-    return out
 
 
 def one(name: str, seconds: float) -> dict:
