@@ -775,3 +775,15 @@ def test_a_token_needs_a_hex_zid_a_known_kind_a_ros_node_name_and_a_topic():
         ros2.liveliness_token("ab", 0, 0, "NN", "n", namespace="robot1")  # not absolute
     key = ros2.liveliness_token("ab", 0, 0, "NN", "n", namespace="/robot1")
     assert key.endswith("/%/%robot1/n") and ros2.parse_liveliness_token(key).namespace == "/robot1"
+
+
+def test_the_bridge_hosts_version_is_the_one_tests_look_for():
+    """``make ros2`` keys its cache by the host's version; `RosDdsBridge` looks there."""
+    import re
+    from pathlib import Path
+
+    from gmmap.eval.ros2dds import bridge
+
+    cargo = (Path(__file__).parents[1] / "tools" / "ros2dds-bridge" / "Cargo.toml").read_text()
+    assert re.search(r'^version = "(.*)"', cargo, re.M)[1] == bridge.PLUGIN_VERSION
+    assert f'zenoh-plugin-ros2dds = {{ version = "={bridge.PLUGIN_VERSION}"' in cargo
