@@ -218,7 +218,7 @@ def place_recall(benches: dict[str, Any], folder: Path) -> Path | None:
                 label = f"{case} ({'GMM' if k == 'gmm' else 'raw points'})"
                 ax.plot(n, c[k], style, color=f"C{i % 10}", label=label)
         ax.set(xlabel="N", ylabel="recall@N", ylim=(0, 1.02), title="Place recognition")
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
         return save(fig, folder / "place_recall.png")
     keys = [(f"recall_at_{a}", b) for a in ("1", "1pct") for b in ("gmm", "points")]
     rows = {
