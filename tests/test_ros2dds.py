@@ -36,6 +36,16 @@ def domain() -> int:
     return 100 + os.getpid() % 100
 
 
+def play(clouds, odom, frames) -> None:
+    """``frames`` as a 10 Hz camera driver publishes them: each frame's odometry and cloud,
+    then one more pose just after the last frame (its pose is interpolated)."""
+    for f in frames:
+        odom.write(graph.odometry(f.pose, f.stamp))
+        clouds.write(graph.point_cloud(f.points, "camera", f.stamp))
+        time.sleep(0.1)
+    odom.write(graph.odometry(frames[-1].pose, frames[-1].stamp + 0.05))
+
+
 def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_path):
     port, dds = free_port(), domain()
     heard: dict[str, list] = {"map": [], "status": [], "points": []}
@@ -65,11 +75,7 @@ def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_pat
             odom = sensor.publisher("/odom", m.Odometry)
             assert graph.matched(clouds) and graph.matched(odom), "the bridge made no route"
             time.sleep(1.0)  # the route's Zenoh side reaches the node's session
-            for f in frames:
-                odom.write(graph.odometry(f.pose, f.stamp))
-                clouds.write(graph.point_cloud(f.points, "camera", f.stamp))
-                time.sleep(0.1)  # a 10 Hz camera
-            odom.write(graph.odometry(frames[-1].pose, frames[-1].stamp + 0.05))
+            play(clouds, odom, frames)
             assert wait(lambda: node.store.seqs("a") == [0, 1], 30), bridge.counts
 
             def status() -> dict:
@@ -226,11 +232,7 @@ def test_two_robots_on_two_bridges_join_and_publish_one_tf_tree(tmp_path):
                 writers.append((clouds, odom, part))
             time.sleep(2.0)  # the bridges' routes reach the nodes' sessions
             for clouds, odom, part in writers:
-                for f in part:
-                    odom.write(graph.odometry(f.pose, f.stamp))
-                    clouds.write(graph.point_cloud(f.points, "camera", f.stamp))
-                    time.sleep(0.1)
-                odom.write(graph.odometry(part[-1].pose, part[-1].stamp + 0.05))
+                play(clouds, odom, part)
             assert wait(lambda: ("a/map", "b/map") in edges, 60), edges
             time.sleep(1.5)  # both nodes have published their tree by now
             assert set(edges) == {("a/map", "b/map")}  # one tree, seen through robot a's bridge
@@ -275,11 +277,7 @@ def test_a_bag_recorded_through_the_bridge_is_read_by_gmmap_build(tmp_path, stor
         odom = driver.publisher("/odom", m.Odometry)
         assert graph.matched(clouds) and graph.matched(odom)
         time.sleep(1.0)
-        for f in frames:
-            odom.write(graph.odometry(f.pose, f.stamp))
-            clouds.write(graph.point_cloud(f.points, "camera", f.stamp))
-            time.sleep(0.1)
-        odom.write(graph.odometry(frames[-1].pose, frames[-1].stamp + 0.05))
+        play(clouds, odom, frames)
         assert wait(lambda: len(got) == 2 * len(frames) + 1, 10), len(got)
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
     types = {"points": ros2.POINTCLOUD2, "odom": ros2.ODOMETRY}
