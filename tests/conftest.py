@@ -49,3 +49,22 @@ def wait(cond, timeout: float = 15.0) -> bool:
             return True
         time.sleep(0.05)
     return bool(cond())
+
+
+def stop_robots(nodes) -> list[tuple[str, str]]:
+    """SIGINT to each ``gmmap robot`` process, then their (stdout, stderr) once they end."""
+    import signal
+
+    for node in nodes:
+        node.send_signal(signal.SIGINT)
+    return [node.communicate(timeout=60) for node in nodes]
+
+
+def assert_two_robots_joined(nodes, outs, folder: Path) -> None:
+    """Robots a and b ended cleanly, each holding both robots' two submaps, in one group."""
+    import json
+
+    assert [n.returncode for n in nodes] == [0, 0], [err[-1500:] for _, err in outs]
+    for name in ("a", "b"):
+        r = json.loads((folder / f"{name}.json").read_text())
+        assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import wait
+from conftest import assert_two_robots_joined, stop_robots, wait
 from gmmap.fleet.net.transport import free_port
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
@@ -154,13 +154,8 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
         assert np.linalg.norm([t.x, t.y, t.z]) < 0.05  # one mocap frame: the identity
     finally:
         sub.unregister()
-        for node in nodes:
-            node.send_signal(signal.SIGINT)
-        outs = [node.communicate(timeout=60) for node in nodes]
-    assert [n.returncode for n in nodes] == [0, 0], [err[-1500:] for _, err in outs]
-    for name in ("a", "b"):
-        r = json.loads((tmp_path / f"{name}.json").read_text())
-        assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]
+        outs = stop_robots(nodes)
+    assert_two_robots_joined(nodes, outs, tmp_path)
 
 
 def test_the_ros1_node_maps_depth_images_posed_by_a_tf_chain(tmp_path, roscore):

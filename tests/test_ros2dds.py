@@ -6,7 +6,6 @@ bridge or the cyclonedds package is missing."""
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -14,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import wait
+from conftest import assert_two_robots_joined, stop_robots, wait
 from gmmap.config import Config
 from gmmap.eval.ros2dds.bridge import missing
 from gmmap.fleet.net.transport import free_port
@@ -239,13 +238,8 @@ def test_two_robots_on_two_bridges_join_and_publish_one_tf_tree(tmp_path):
             t = edges[("a/map", "b/map")]
             assert np.linalg.norm([t.x, t.y, t.z]) < 0.05  # one mocap frame: the identity
         finally:
-            for node in nodes:
-                node.send_signal(signal.SIGINT)
-            outs = [node.communicate(timeout=60) for node in nodes]
-    assert [n.returncode for n in nodes] == [0, 0], [err[-1500:] for _, err in outs]
-    for name in ("a", "b"):
-        r = json.loads((tmp_path / f"{name}.json").read_text())
-        assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]
+            outs = stop_robots(nodes)
+    assert_two_robots_joined(nodes, outs, tmp_path)
 
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
