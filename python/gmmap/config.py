@@ -24,6 +24,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.options import (
     BackendOptions,
     BuildOptions,
+    ExploreOptions,
     LinkOptions,
     PlaceOptions,
     PlannerOptions,
@@ -58,6 +59,7 @@ class Config:
     station: StationOptions = field(default_factory=StationOptions)
     ros: RosOptions = field(default_factory=RosOptions)
     planner: PlannerOptions = field(default_factory=PlannerOptions)
+    explore: ExploreOptions = field(default_factory=ExploreOptions)
     sim: SimOptions = field(default_factory=SimOptions)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:

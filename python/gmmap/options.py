@@ -382,6 +382,35 @@ class PlannerOptions:
 
 
 @dataclass(frozen=True)
+class ExploreOptions:
+    """Exploration (`gmmap.mapping.explore`): free-space horizons added to each shared submap,
+    frontiers, the route graph between viewpoints, and how robots share goals. The simulator's
+    robots, world and sensor are the ``sim`` section's; the run ends when no robot has a
+    frontier left or after ``time_budget`` s of simulated time."""
+
+    bins: int = 72  #: Directions per free-space horizon (72: every 5°, one byte each)
+    horizon_spacing: float = 1.0  #: Metres of path between two horizons' viewpoints
+    link_radius: float = (
+        2.5  #: Viewpoints this close join the route graph if the line between is known free
+    )
+    min_frontier: int = 3  #: Frontier points a cluster needs to become a goal
+    claim_radius: float = 2.0  #: A frontier this close to a peer's goal is left to the peer
+    replan_s: float = 4.0  #: Seconds of travel between two goal choices
+    turn_rate: float = 0.8  #: Turning rate (rad/s) of the simulated robots
+    time_budget: float = 300.0  #: Simulated seconds before a run ends
+
+    def __post_init__(self) -> None:
+        if self.bins < 8 or self.bins > 720:
+            raise InvalidInputError(f"explore.bins must be in [8, 720], got {self.bins}")
+        if not (self.horizon_spacing > 0 and self.link_radius > 0 and self.claim_radius >= 0):
+            raise InvalidInputError("explore.horizon_spacing, link_radius > 0, claim_radius >= 0")
+        if not (self.replan_s > 0 and self.turn_rate > 0 and self.time_budget > 0):
+            raise InvalidInputError("explore.replan_s, turn_rate and time_budget must be > 0")
+        if self.min_frontier < 1:
+            raise InvalidInputError("explore.min_frontier must be >= 1")
+
+
+@dataclass(frozen=True)
 class SimOptions:
     """The simulator (`gmmap.io.sim`): which world, how many robots, which sensor, how they move.
 

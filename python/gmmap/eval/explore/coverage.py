@@ -1,0 +1,93 @@
+"""Exploration measured against the true world, never against the map.
+
+``surface``: the share of the world's vertical surfaces (every 10 cm, 0.3-1.7 m above the
+floor: what a ground robot's sensor can see of walls and furniture) that lie within 10 cm of
+the team's map, placed by ground truth. Floors, ceilings and table tops are left out: a
+sensor looks along them, and they would measure the sensor's field of view, not exploration.
+Samples inside or against another shape, or outside the world's bounds (the outer faces of
+its walls), cannot be seen and are not counted. ``area``: the share of the floor where a robot
+fits (a 25 cm grid, 20 cm from any shape) that the team's horizons say is free.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gmmap.io.sim import Box, Cylinder, World
+
+STEP = 0.1  # metres between surface samples
+HEIGHTS = np.arange(0.3, 1.71, STEP)
+WITHIN = 0.1  # metres from the map that count as covered
+
+
+def surface_samples(world: World) -> np.ndarray:
+    """(N, 3) points on the world's visible vertical surfaces (see the module docstring)."""
+    pts = []
+    for s in world.shapes:
+        if isinstance(s, Box):
+            z0, z1 = s.centre[2] - s.size[2] / 2, s.centre[2] + s.size[2] / 2
+            zs = HEIGHTS[(z0 < HEIGHTS) & (z1 > HEIGHTS)]
+            c, sn = math.cos(s.yaw), math.sin(s.yaw)
+            hx, hy = s.size[0] / 2, s.size[1] / 2
+            for ax, half, other in ((0, hx, hy), (1, hy, hx)):
+                along = np.arange(-other + STEP / 2, other, STEP)
+                for side in (-1.0, 1.0):
+                    local = np.zeros((len(along), 2))
+                    local[:, ax], local[:, 1 - ax] = side * (half + 0.03), along
+                    xy = np.c_[
+                        c * local[:, 0] - sn * local[:, 1], sn * local[:, 0] + c * local[:, 1]
+                    ]
+                    xy += s.centre[:2]
+                    pts += [np.c_[xy, np.full(len(xy), z)] for z in zs]
+        elif isinstance(s, Cylinder):
+            zs = HEIGHTS[(s.z_min < HEIGHTS) & (s.z_max > HEIGHTS)]
+            n = max(6, int(2 * math.pi * s.radius / STEP))
+            a = np.linspace(0, 2 * math.pi, n, endpoint=False)
+            xy = np.c_[s.x + (s.radius + 0.03) * np.cos(a), s.y + (s.radius + 0.03) * np.sin(a)]
+            pts += [np.c_[xy, np.full(len(xy), z)] for z in zs]
+    p = np.vstack(pts) if pts else np.zeros((0, 3))
+    lo, hi = world.bounds()
+    inside = ((p[:, :2] > lo[:2] + 0.05) & (p[:, :2] < hi[:2] - 0.05)).all(axis=1)
+    p = p[inside]
+    # Each sample sits 3 cm off its face: one closer than 2 cm to a shape is against another.
+    free = world.clearance(p[:, :2], (0.3, 1.7)) > 0.02
+    return p[free]
+
+
+def floor_samples(world: World, clearance: float = 0.2) -> np.ndarray:
+    """(N, 2) points of the floor where a robot fits, every 25 cm."""
+    lo, hi = world.bounds()
+    xs, ys = np.arange(lo[0] + 0.125, hi[0], 0.25), np.arange(lo[1] + 0.125, hi[1], 0.25)
+    xy = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    return xy[world.clearance(xy, (0.05, 1.2)) > clearance]
+
+
+class Coverage:
+    """Covered surface samples, updated as map points (world frame) arrive."""
+
+    def __init__(self, world: World) -> None:
+        self.samples = surface_samples(world)
+        self.floor = floor_samples(world)
+        self.covered = np.zeros(len(self.samples), dtype=bool)
+        self._tree = cKDTree(self.samples)
+
+    def add_points(self, points_world: np.ndarray) -> None:
+        if not len(points_world):
+            return
+        hits = self._tree.query_ball_point(np.asarray(points_world, float), WITHIN)
+        idx = [i for h in hits for i in h]
+        if idx:
+            self.covered[np.array(idx)] = True
+
+    @property
+    def surface(self) -> float:
+        return float(self.covered.mean()) if len(self.samples) else 0.0
+
+    def area(self, known_free: Callable[[np.ndarray], np.ndarray]) -> float:
+        """The share of ``floor`` that ``known_free`` ((N, 2) world points → bool) says is
+        free: the team's horizons, or the dense baseline's grid."""
+        return float(known_free(self.floor).mean()) if len(self.floor) else 0.0

@@ -1,0 +1,252 @@
+"""Simulated exploration runs: robots move where their explorers say, in a world they do not
+know; the simulator renders their sensors, checks collisions against the true world and
+measures coverage against it.
+
+Modes: ``shared`` (GMM submaps with their horizons and goals go to every robot: one
+broadcast each, as on a shared channel), ``no-sharing`` (the same robots, each on its own
+map) and ``dense`` (`gmmap.eval.explore.dense`: point clouds shared, a 5 cm occupancy grid).
+A run with one robot is the ``alone`` baseline. Odometry is perfect here: the frames between
+robots are what the explorers' mappers find (shared) or given (dense, an upper bound).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from gmmap.config import Config
+from gmmap.errors import InvalidInputError
+from gmmap.eval.explore.coverage import Coverage
+from gmmap.fleet.wire.codec import encode
+from gmmap.io.datasets.tum import depth_to_points
+from gmmap.io.sim import DepthCamera, Lidar, World, get_world, sim_sensor
+from gmmap.io.sim.run import EPOCH
+from gmmap.mapping.explore import Claim, Explorer, SharedSubmap
+from gmmap.mapping.frame import Frame
+from gmmap.mapping.frontier import FreeSpace
+
+MODES = ("shared", "no-sharing", "dense")
+CLAIM_BYTES = 16  # a position and a goal, float32 (x, y) each
+SAMPLES_PER_COMPONENT = 20  # map points drawn per GMM component to measure coverage
+Progress = Callable[[str], None]
+
+
+@dataclass
+class Body:
+    """A simulated robot's true pose on the floor and what happened to it."""
+
+    xy: np.ndarray
+    yaw: float
+    path: list[list[float]] = field(default_factory=list)
+    collisions: int = 0
+
+    def pose(self) -> np.ndarray:
+        T = np.eye(4)
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        T[:2, :2] = [[c, -s], [s, c]]
+        T[:2, 3] = self.xy
+        return T
+
+
+@dataclass
+class RunResult:
+    """One exploration run: the keys `gmmap explore --json` reports (see `summary`)."""
+
+    mode: str
+    world: str
+    sensor: str
+    robots: int
+    coverage: float = 0.0
+    area: float = 0.0
+    time_to_90_s: float | None = None
+    collisions: int = 0
+    bytes_per_robot: list[int] = field(default_factory=list)
+    statuses: list[str] = field(default_factory=list)
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    curve: list[tuple[float, float, float]] = field(default_factory=list)  # (t, surface, area)
+    paths: list[list[list[float]]] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        d = asdict(self)
+        for k in ("curve", "paths"):
+            d.pop(k)
+        return d
+
+
+def starts(world: World, n: int) -> list[tuple[float, float, float]]:
+    """Where ``n`` robots start, in a file 0.8 m apart along their heading (a corridor fits
+    them): about the world's ``start``, else its first route's third waypoint (an office's
+    corridor)."""
+    if world.start is not None:
+        x, y, yaw = world.start
+    elif world.routes:
+        route = world.routes[0]
+        (x, y), nxt = route[min(2, len(route) - 1)], route[min(3, len(route) - 1)]
+        yaw = math.atan2(nxt[1] - y, nxt[0] - x) if (nxt[0], nxt[1]) != (x, y) else 0.0
+    else:
+        raise InvalidInputError(f"world {world.name!r} has no start and no route")
+    along = np.array([math.cos(yaw), math.sin(yaw)])
+    out = []
+    for i in range(n):
+        xy = np.array([x, y]) + ((n - 1) / 2 - i) * 0.8 * along
+        if world.clearance(xy[None])[0] < 0.3:
+            raise InvalidInputError(f"{world.name}: no room to start robot {i} at {xy.round(2)}")
+        out.append((float(xy[0]), float(xy[1]), yaw))
+    return out
+
+
+def sense(sensor: DepthCamera | Lidar, world: World, pose: np.ndarray, rng) -> np.ndarray:
+    if isinstance(sensor, Lidar):
+        return sensor.scan(world, pose, rng)
+    depth = sensor.render(world, pose, rng)
+    raw = np.round(depth * sensor.depth_factor).astype(np.uint16)
+    return depth_to_points(raw, sensor.intrinsics, sensor.depth_factor, 1, 0.1, 5.0)
+
+
+class Team:
+    """The robots of one run and the loop that moves them."""
+
+    def __init__(self, config: Config, mode: str, robots: int | None = None) -> None:
+        if mode not in MODES:
+            raise InvalidInputError(f"mode must be one of {MODES}, got {mode!r}")
+        sim = config.sim
+        self.config, self.mode = config, mode
+        self.world = World.load(sim.world) if sim.world.endswith(".json") else get_world(sim.world)
+        self.sensor = sim_sensor(sim)
+        self.n = robots or sim.robots
+        self.bodies = [Body(np.array(s[:2]), s[2]) for s in starts(self.world, self.n)]
+        self.map_to_world = [b.pose() for b in self.bodies]
+        self.names = [f"robot_{i}" for i in range(self.n)]
+        self.grid = None
+        if mode == "dense":
+            from gmmap.eval.explore.dense import DenseGrid
+
+            self.grid = DenseGrid(self.bodies[0].xy, config.planner.z_band)
+        self.agents = [self._agent(i) for i in range(self.n)]
+        self.coverage = Coverage(self.world)
+        self.bytes = [0] * self.n
+        self.rng = np.random.default_rng([sim.seed, 0xE4])
+
+    def _agent(self, i: int):
+        if self.mode == "dense":
+            from gmmap.eval.explore.dense import DenseExplorer
+
+            return DenseExplorer(self.names[i], self.config, self.map_to_world[i], self.grid)
+        return Explorer(self.names[i], self.config, share=self.mode == "shared")
+
+    def run(self, progress: Progress | None = None) -> RunResult:
+        sim, opt = self.config.sim, self.config.explore
+        dt = 1.0 / sim.rate
+        spin = 0.0 if isinstance(self.sensor, Lidar) else 2 * math.pi / opt.turn_rate
+        result = RunResult(self.mode, self.world.name, type(self.sensor).__name__, self.n)
+        t0, t, idle = time.perf_counter(), 0.0, [False] * self.n
+        while t < opt.time_budget:
+            for i in range(self.n):
+                self._sense(i, t)
+            for i in range(self.n):
+                idle[i] = not self._move(i, t, dt, spin)
+            if t - (result.curve[-1][0] if result.curve else -1e9) >= 2.0:
+                self._measure(result, t, progress)
+            t += dt
+            if all(idle) and t > spin:
+                break
+        for i in range(self.n):
+            self._share(i, self.agents[i].flush())
+        self._measure(result, t, progress)
+        result.sim_time_s, result.wall_time_s = t, time.perf_counter() - t0
+        result.collisions = sum(b.collisions for b in self.bodies)
+        result.bytes_per_robot = list(self.bytes)
+        result.statuses = [a.status for a in self.agents]
+        result.paths = [b.path for b in self.bodies]
+        above = [c[0] for c in result.curve if c[1] >= 0.9]
+        result.time_to_90_s = above[0] if above else None
+        return result
+
+    def _sense(self, i: int, t: float) -> None:
+        body = self.bodies[i]
+        gt = body.pose() @ self.sensor.mount()
+        rng = np.random.default_rng([self.config.sim.seed, i, round(t * 1000)])
+        points = sense(self.sensor, self.world, gt, rng)
+        odom = np.linalg.inv(self.map_to_world[i]) @ gt
+        self._share(i, self.agents[i].observe(Frame(EPOCH + t, points, odom, gt)))
+        body.path.append([round(float(body.xy[0]), 3), round(float(body.xy[1]), 3)])
+
+    def _share(self, i: int, shared: SharedSubmap | None) -> None:
+        if shared is None:
+            return
+        if self.mode == "dense":
+            self.bytes[i] += shared.wire_bytes
+            self.coverage.add_points(shared.points_world)
+        else:
+            self.bytes[i] += len(encode(shared.submap)) + shared.horizon_bytes
+            s = shared.submap
+            n = SAMPLES_PER_COMPONENT * len(s.gmm)
+            pts = s.gmm.sample(n, seed=s.seq) @ s.gt_anchor[:3, :3].T + s.gt_anchor[:3, 3]
+            self.coverage.add_points(pts)
+        for j, agent in enumerate(self.agents):
+            if j != i:
+                agent.receive(shared)
+
+    def _move(self, i: int, t: float, dt: float, spin: float) -> bool:
+        """One step of robot i; False when it has nowhere to go."""
+        body, opt, agent = self.bodies[i], self.config.explore, self.agents[i]
+        if t < spin:
+            body.yaw += opt.turn_rate * dt
+            return True
+        before = agent.claim().goal
+        direction = agent.next_direction(EPOCH + t)
+        after = agent.claim()
+        if self.mode != "no-sharing" and _moved(before, after.goal):
+            self.bytes[i] += CLAIM_BYTES
+            for j, other in enumerate(self.agents):
+                if j != i:
+                    other.receive_claim(self.names[i], Claim(after.position, after.goal))
+        if direction is None:
+            return agent.status == "exploring"
+        # A holonomic base: it moves along the direction and turns its sensor towards it.
+        d = self.map_to_world[i][:2, :2] @ direction
+        error = (math.atan2(d[1], d[0]) - body.yaw + math.pi) % (2 * math.pi) - math.pi
+        body.yaw += max(-opt.turn_rate * dt, min(opt.turn_rate * dt, error))
+        target = body.xy + self.config.sim.speed * dt * d
+        radius = self.config.planner.robot_radius
+        if self.world.clearance(target[None], self.config.planner.z_band)[0] < radius:
+            body.collisions += 1
+        else:
+            body.xy = target
+        return True
+
+    def _measure(self, result: RunResult, t: float, progress: Progress | None) -> None:
+        if self.grid is not None:
+            area = self.coverage.area(self.grid.known_free)
+        else:
+            horizons = []
+            for i, agent in enumerate(self.agents):
+                horizons += [h.moved(self.map_to_world[i]) for h in agent.own_horizons()]
+            area = self.coverage.area(FreeSpace(horizons).contains)
+        result.curve.append((round(t, 2), round(self.coverage.surface, 4), round(area, 4)))
+        result.coverage, result.area = self.coverage.surface, area
+        if progress and len(result.curve) % 10 == 0:
+            progress(
+                f"{self.mode}: t {t:.0f} s, surface {self.coverage.surface:.0%}, area {area:.0%}"
+            )
+
+
+def _moved(before: np.ndarray | None, after: np.ndarray | None) -> bool:
+    if before is None or after is None:
+        return (before is None) != (after is None)
+    return bool(np.linalg.norm(before - after) > 0.05)
+
+
+def run_explore(
+    config: Config,
+    mode: str = "shared",
+    robots: int | None = None,
+    progress: Progress | None = None,
+) -> RunResult:
+    """One exploration run of ``config``'s world, sensor and robots in ``mode``."""
+    return Team(config, mode, robots).run(progress)

@@ -1,0 +1,498 @@
+"""Exploration on shared GMM submaps: one robot's algorithm object (it never sees ground truth).
+
+An `Explorer` turns its robot's frames into submaps, each with the free-space horizons of
+its path (`gmmap.mapping.frontier`), and holds what its peers share. It places the team's
+submaps in its own map frame by the frames its `Mapper` finds between robots, so before two
+robots have joined their maps each explores alone, and after, they share one frontier set.
+
+Choosing a goal: the frontiers of the union of every known horizon, minus those behind a
+surface (the GMM occupancy field), those a peer has claimed (its goal within
+``claim_radius``) and those that failed before. A route runs through the graph of
+viewpoints: consecutive viewpoints of one robot (it drove between them) and viewpoints within
+``link_radius`` whose straight line is known free and clear; a frontier's cost is the route to
+the viewpoint that saw it plus the straight, observed line to its target. Moving: the GMM
+gradient planner steers towards the next waypoint on the team's field and on a field of what
+the sensor saw since the last submap (a robot avoids what it has just seen, shared or not).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from gmmap.config import Config
+from gmmap.mapping.frame import Frame
+from gmmap.mapping.frontier import FreeSpace, Horizon, encode_horizons, horizon_from, merge_ranges
+from gmmap.mapping.mapper import Mapper
+from gmmap.mapping.planner import GradientPlanner, OccupancyField
+from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
+from gmmap.math.gmm import Gmm
+from gmmap.math.points import voxel_filter
+
+Node = tuple[str, int]
+ARRIVED = 0.35  # metres from a waypoint that count as there
+STUCK_STEPS = 24
+RING = np.linspace(0, 2 * math.pi, 8, endpoint=False)  # footprint test points
+SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
+
+
+@dataclass
+class SharedSubmap:
+    """What one robot sends of a submap when exploring: the submap and its horizons (in its
+    anchor frame); ``horizon_bytes`` is their size on the wire, beside the submap's."""
+
+    submap: Submap
+    horizons: list[Horizon]
+
+    @property
+    def horizon_bytes(self) -> int:
+        return len(encode_horizons(self.horizons))
+
+
+@dataclass
+class Claim:
+    """A robot's position and goal in its own map frame (16 bytes on the wire as float32)."""
+
+    position: np.ndarray
+    goal: np.ndarray | None
+
+
+@dataclass
+class Route:
+    waypoints: np.ndarray
+    goal: np.ndarray
+    size: int
+    chosen_at: float
+    reached: int = 0
+    best: float = math.inf
+    since_best: int = 0
+    planner: GradientPlanner | None = None
+
+
+class HorizonRecorder:
+    """The horizons of a robot's path since its last submap, in its map frame."""
+
+    def __init__(self, bins: int, spacing: float, band: tuple[float, float]) -> None:
+        self.bins, self.spacing, self.band = bins, spacing, band
+        self.closed: list[Horizon] = []
+        self.current: Horizon | None = None
+
+    def add(self, frame: Frame) -> None:
+        pose = frame.pose
+        pts = np.asarray(frame.points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
+        origin = pose[:2, 3].copy()
+        if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
+            self.closed.append(self.current)
+            self.current = None
+        if self.current is None:
+            self.current = Horizon(origin, np.full(self.bins, np.nan))
+        seen = horizon_from(pts, self.current.origin, self.band, self.bins)
+        self.current.ranges = merge_ranges(self.current.ranges, seen)
+
+    def all(self) -> list[Horizon]:
+        return self.closed + ([self.current] if self.current is not None else [])
+
+    def take(self, anchor: np.ndarray) -> list[Horizon]:
+        """The horizons so far, moved into ``anchor``'s frame; the next submap starts afresh
+        (its first viewpoint is where this one's last was)."""
+        inverse = np.linalg.inv(anchor)
+        out = [h.moved(inverse) for h in self.all()]
+        self.closed, self.current = [], None
+        return out
+
+
+@dataclass
+class Knowledge:
+    """The team's map in the robot's frame: horizons, the occupancy field, the route graph."""
+
+    space: FreeSpace
+    field: OccupancyField | None
+    edges: list[tuple[int, int]] = field(default_factory=list)
+    last_own: int | None = None  # the robot's latest viewpoint among ``space``'s
+
+
+class Explorer:
+    """See the module docstring. ``share``: False keeps the robot to its own submaps."""
+
+    def __init__(self, robot: str, config: Config | None = None, share: bool = True) -> None:
+        self.robot = robot
+        self.config = config or Config()
+        self.options = self.config.explore
+        self.planner_options = self.config.planner
+        self.builder = SubmapBuilder(robot, self.config.build, self.config.select)
+        self.mapper = Mapper(self.config) if share else None
+        self.recorder = HorizonRecorder(
+            self.options.bins, self.options.horizon_spacing, self.planner_options.z_band
+        )
+        self.team: dict[Node, SharedSubmap] = {}
+        self.claims: dict[str, Claim] = {}
+        self.route: Route | None = None
+        self.failed: list[np.ndarray] = []
+        self.status = "exploring"
+        self.position = np.zeros(2)
+        self._chosen_at = -math.inf
+        self._reoptimize = False
+        self._recent: np.ndarray | None = None
+        self._recent_anchor = np.eye(4)
+        self._knowledge: Knowledge | None = None
+        self._dirty = True
+
+    # ---- input ------------------------------------------------------------------------------
+
+    def observe(self, frame: Frame) -> SharedSubmap | None:
+        """Maps a frame; returns the submap it completed, with its horizons, to share."""
+        self.recorder.add(frame)
+        self.position = frame.pose[:2, 3].copy()
+        submap = self.builder.add(frame)
+        if submap is None:
+            return None
+        shared = SharedSubmap(submap, self.recorder.take(submap.anchor))
+        self._hold(shared)
+        return shared
+
+    def flush(self) -> SharedSubmap | None:
+        """The submap of the frames since the last one (the robot stops), to share."""
+        submap = self.builder.flush()
+        if submap is None:
+            return None
+        shared = SharedSubmap(submap, self.recorder.take(submap.anchor))
+        self._hold(shared)
+        return shared
+
+    def own_horizons(self) -> list[Horizon]:
+        """This robot's horizons in its map frame."""
+        own = [k for k in self.team if k[0] == self.robot]
+        moved = [h.moved(self.team[k].submap.anchor) for k in own for h in self.team[k].horizons]
+        return moved + self.recorder.all()
+
+    def receive(self, shared: SharedSubmap) -> None:
+        """A peer's submap (ignored without sharing)."""
+        if self.mapper is not None:
+            self._hold(shared)
+
+    def receive_claim(self, robot: str, claim: Claim) -> None:
+        self.claims[robot] = claim
+
+    def claim(self) -> Claim:
+        return Claim(self.position.copy(), None if self.route is None else self.route.goal.copy())
+
+    def _hold(self, shared: SharedSubmap) -> None:
+        """Own submaps change what the robot steers by at once; peers' wait for its next
+        choice of goal (placing them means optimising the pose graph)."""
+        s = shared.submap
+        self.team[(s.robot, s.seq)] = shared
+        if self.mapper is not None:
+            matches = self.mapper.add([s])
+            self._reoptimize |= s.robot != self.robot or any(m.accepted for m in matches)
+        if s.robot == self.robot:
+            self._dirty = True
+            self._recent = s.points  # until the next submap: in the live field (anchor frame)
+            self._recent_anchor = s.anchor
+
+    # ---- where the team's submaps are -------------------------------------------------------
+
+    def _poses(self) -> dict[Node, np.ndarray]:
+        """Each team submap's anchor in this robot's map frame (joined robots only)."""
+        poses = {k: v.submap.anchor for k, v in self.team.items() if k[0] == self.robot}
+        if self.mapper is None:
+            return poses
+        if self._reoptimize:
+            self.mapper.optimize()
+            self._reoptimize = False
+        result = self.mapper.result
+        if result is None or self.robot not in result.to_reference:
+            return poses  # nothing of its own placed yet: nothing to place the others by
+        group = self.mapper.group_of(self.robot)
+        mine = np.linalg.inv(result.to_reference[self.robot])
+        for key in self.team:
+            if key[0] in group and key in result.poses:
+                poses[key] = mine @ result.poses[key]
+        return poses
+
+    def _peer_frame(self, robot: str) -> np.ndarray | None:
+        if self.mapper is None or self.mapper.result is None:
+            return None
+        frames = self.mapper.frames
+        if self.robot not in frames.robots or robot not in self.mapper.group_of(self.robot):
+            return None
+        return frames.transform(self.robot, robot)
+
+    def knowledge(self) -> Knowledge:
+        """The team's horizons, field and route graph in this robot's frame (cached until a
+        submap arrives)."""
+        if self._knowledge is not None and not self._dirty:
+            return self._knowledge
+        poses = self._poses()
+        keys = sorted(poses)
+        horizons = [h.moved(poses[k]) for k in keys for h in self.team[k].horizons]
+        chains = [k[0] for k in keys for _ in self.team[k].horizons]
+        gmms = [self.team[k].submap.gmm.transform(poses[k]) for k in keys]
+        shares = [self.team[k].submap.n_points for k in keys]
+        team_field = (
+            OccupancyField(concatenate(gmms, shares), self.planner_options) if gmms else None
+        )
+        space = FreeSpace(horizons)
+        own = [i for i, robot in enumerate(chains) if robot == self.robot]
+        # Held before the edges are found: finding them evaluates this knowledge's field.
+        self._knowledge = Knowledge(space, team_field, last_own=own[-1] if own else None)
+        self._dirty = False
+        self._knowledge.edges = self._edges(space, chains)
+        return self._knowledge
+
+    # ---- occupancy --------------------------------------------------------------------------
+
+    def _live_field(self) -> OccupancyField | None:
+        """What the sensor saw since the last-but-one submap, as small components (5 cm
+        spread): a robot steers clear of what it has just seen, shared or not."""
+        parts = []
+        if self.builder.anchor is not None and len(self.builder.buffer):
+            a = self.builder.anchor
+            parts.append(self.builder.buffer.centroids() @ a[:3, :3].T + a[:3, 3])
+        if self._recent is not None:
+            a = self._recent_anchor
+            parts.append(self._recent @ a[:3, :3].T + a[:3, 3])
+        if not parts:
+            return None
+        pts = np.vstack(parts)
+        lo, hi = self.planner_options.z_band
+        pts = voxel_filter(pts[(pts[:, 2] >= lo) & (pts[:, 2] <= hi)], 0.1)
+        if not len(pts):
+            return None
+        covs = np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1))
+        return OccupancyField(Gmm(np.full(len(pts), 1 / len(pts)), pts, covs), self.planner_options)
+
+    def space(self) -> FreeSpace:
+        """The team's horizons and this robot's since its last submap."""
+        return FreeSpace([*self.knowledge().space.horizons, *self.recorder.all()])
+
+    def roomy(self, xy: np.ndarray, space: FreeSpace) -> np.ndarray:
+        """Whether the robot's footprint about each (N, 2) point is all known free: the
+        horizons saw through it. There the team's mixtures may not close a passage: EM spans
+        a doorway with the wall's components, and only the horizons say that rays went through
+        it."""
+        reach = self.planner_options.robot_radius + self.planner_options.margin
+        ring = reach * np.stack([np.cos(RING), np.sin(RING)], -1)
+        pts = np.atleast_2d(xy)[:, None, :] + np.vstack([np.zeros((1, 2)), ring])[None]
+        return space.contains(pts.reshape(-1, 2)).reshape(len(pts), -1).all(axis=1)
+
+    def occupancy(
+        self, xy: np.ndarray, live: OccupancyField | None, space: FreeSpace | None = None
+    ) -> np.ndarray:
+        """The team's field where the robot's footprint is not known free, or the live
+        field, whichever is larger, at (N, 2) points."""
+        xy = np.atleast_2d(xy)
+        out = np.zeros(len(xy))
+        team = self.knowledge().field
+        if team is not None and len(team):
+            out = team.occupancy_tiled(xy)
+            out[self.roomy(xy, space or self.space())] = 0.0
+        if live is not None and len(live):
+            out = np.maximum(out, live.occupancy_tiled(xy))
+        return out
+
+    def _blocked(self, live: OccupancyField | None, space: FreeSpace | None = None):
+        level = self.planner_options.max_occupancy
+        space = space or self.space()
+        return lambda xy: self.occupancy(xy, live, space) >= level
+
+    # ---- the route graph --------------------------------------------------------------------
+
+    def _edges(self, space: FreeSpace, chains: list[str]) -> list[tuple[int, int]]:
+        """Edges between viewpoints: consecutive ones of one robot, and near ones with a known
+        free, clear line between them."""
+        edges = [(i, i + 1) for i in range(len(chains) - 1) if chains[i] == chains[i + 1]]
+        if len(space) < 2:
+            return edges
+        pairs = cKDTree(space.origins).query_pairs(self.options.link_radius, output_type="ndarray")
+        if not len(pairs):
+            return edges
+        ok = self._clear_lines(space, space.origins[pairs[:, 0]], space.origins[pairs[:, 1]])
+        return edges + [tuple(p) for p in pairs[ok]]
+
+    @staticmethod
+    def _clear_lines(space: FreeSpace, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether each segment a→b is inside known free space (a route, not a safe line: the
+        planner keeps the robot off surfaces on the way)."""
+        steps = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0) / 0.2)) + 1)
+        t = np.linspace(0, 1, steps)
+        pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, 2)
+        good = space.contains(pts, shrink=0.1)
+        return good.reshape(len(a), steps).all(axis=1)
+
+    # ---- goals ------------------------------------------------------------------------------
+
+    def _choose(self, stamp: float, live: OccupancyField | None) -> None:
+        self._dirty |= self._reoptimize
+        k = self.knowledge()
+        o = self.options
+        space = self.space()
+        fronts = [
+            f for f in space.frontiers(self._blocked(live, space)) if f.size >= o.min_frontier
+        ]
+        fronts = [f for f in fronts if not self._failed_near(f.goal)]
+        if not fronts:
+            self.route, self.status = None, "done: no frontier left that it can reach"
+            return
+        claimed = self._claimed_goals()
+        free = [
+            f for f in fronts if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
+        ]
+        fronts = free or fronts
+        dist, pred, start = self._distances(space, k, live)
+        costs = []
+        for f in fronts:
+            h = f.horizon
+            cost = dist[h] + float(np.linalg.norm(f.goal - space.origins[h]))
+            costs.append(cost + self._crowding(f.goal))
+        best = int(np.argmin(costs))
+        if not math.isfinite(costs[best]):
+            self.route = None
+            self.status = f"stopped: {len(fronts)} frontiers, none reachable on known free space"
+            return
+        current = self._still_open(fronts, costs)
+        if current is not None and costs[current] <= costs[best] + SWITCH_COST:
+            self.route.chosen_at = stamp  # keep going: switching goals back and forth wastes more
+            return
+        f = fronts[best]
+        chain, node = [], f.horizon
+        while node != start and node >= 0:
+            chain.append(space.origins[node])
+            node = pred[node]
+        waypoints = np.array([*reversed(chain), f.goal])
+        self.route = Route(waypoints, f.goal, f.size, stamp)
+        self.status = "exploring"
+
+    def _still_open(self, fronts: list, costs: list[float]) -> int | None:
+        """The frontier the current route heads for, if it is still one."""
+        if self.route is None:
+            return None
+        gaps = [float(np.linalg.norm(f.goal - self.route.goal)) for f in fronts]
+        i = int(np.argmin(gaps))
+        return i if gaps[i] < 1.0 and math.isfinite(costs[i]) else None
+
+    def _distances(
+        self, space: FreeSpace, k: Knowledge, live: OccupancyField | None
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """Route lengths from the robot to every viewpoint (the robot is the last node)."""
+        n, own = len(space), len(k.space)
+        edges = list(k.edges)
+        pending = list(range(own, n))  # this robot's viewpoints since its last submap
+        edges += [(i, i + 1) for i in pending[:-1]]
+        if pending and k.last_own is not None:
+            edges.append((k.last_own, pending[0]))  # it drove from one to the other
+        start = n
+        near = np.array(
+            cKDTree(space.origins).query_ball_point(self.position, self.options.link_radius), int
+        )
+        if len(near):
+            # From just off the robot: it stands where it stands, even inside a margin.
+            off = self.position + 0.3 * _unit(space.origins[near] - self.position)
+            clear = self._clear_lines(space, off, space.origins[near])
+            edges += [(start, int(i)) for i in near[clear]]
+        latest = pending[-1] if pending else k.last_own
+        if latest is not None:
+            edges.append((start, latest))  # the viewpoint it is at, or just left
+        e = np.array(edges, dtype=int).reshape(-1, 2)
+        pts = np.vstack([space.origins, self.position[None]])
+        w = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1) + 1e-6
+        graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n + 1, n + 1)).tocsr()
+        dist, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
+        return dist, pred, start
+
+    def _claimed_goals(self) -> list[np.ndarray]:
+        out = []
+        for robot, claim in self.claims.items():
+            T = self._peer_frame(robot)
+            if T is not None and claim.goal is not None:
+                out.append(T[:2, :2] @ claim.goal + T[:2, 3])
+        return out
+
+    def _crowding(self, goal: np.ndarray) -> float:
+        """A cost for goals nearer a joined peer than this robot: robots spread out."""
+        cost = 0.0
+        mine = float(np.linalg.norm(goal - self.position))
+        for robot, claim in self.claims.items():
+            T = self._peer_frame(robot)
+            if T is None:
+                continue
+            theirs = float(np.linalg.norm(goal - (T[:2, :2] @ claim.position + T[:2, 3])))
+            cost += max(0.0, mine - theirs)
+        return cost
+
+    def _failed_near(self, goal: np.ndarray) -> bool:
+        return any(np.linalg.norm(goal - g) < 0.75 for g in self.failed)
+
+    # ---- moving -----------------------------------------------------------------------------
+
+    def next_direction(self, stamp: float) -> np.ndarray | None:
+        """The unit direction (map frame) to move in now, or None: no goal (see ``status``)."""
+        r = self.route
+        waiting = self.status != "exploring" and stamp - self._chosen_at < self.options.replan_s
+        if r is None and waiting and not self._dirty:
+            return None  # nothing to do until the team's map changes or time passes
+        live = self._live_field()
+        if r is None or stamp - r.chosen_at >= self.options.replan_s:
+            self._chosen_at = stamp
+            self._choose(stamp, live)
+            r = self.route
+        if r is None:
+            return None
+        while (
+            r.reached < len(r.waypoints)
+            and np.linalg.norm(r.waypoints[r.reached] - self.position) < ARRIVED
+        ):
+            r.reached, r.best, r.since_best = r.reached + 1, math.inf, 0
+        if r.reached == len(r.waypoints):
+            # Arrived: a frontier still there is one this robot cannot see past.
+            self.failed.append(r.goal)
+            self.route = None
+            return None
+        target = r.waypoints[r.reached]
+        gap = float(np.linalg.norm(target - self.position))
+        r.best, r.since_best = (gap, 0) if gap < r.best - 0.05 else (r.best, r.since_best + 1)
+        if r.planner is None:
+            r.planner = GradientPlanner(None, self.planner_options, _MaxField(self, live))
+        r.planner.field = _MaxField(self, live)  # the side it follows round an obstacle stays
+        direction = r.planner.choose(self.position, target) if r.since_best < STUCK_STEPS else None
+        if direction is None:
+            self.failed.append(r.goal)
+            self.route = None
+        return direction
+
+
+class _MaxField:
+    """The field the planner steers on near the robot: the team's, zero where the robot's
+    footprint is known free, and the live field, whichever is larger."""
+
+    def __init__(self, explorer: Explorer, live: OccupancyField | None) -> None:
+        self.explorer, self.space = explorer, explorer.space()
+        team = explorer.knowledge().field
+        near = explorer.position
+        self.team = team.near(near, 0.5) if team is not None and len(team) else None
+        self.live = live.near(near, 0.5) if live is not None and len(live) else None
+
+    def occupancy(self, xy: object) -> np.ndarray:
+        return self.gradient(xy)[0]
+
+    def gradient(self, xy: object) -> tuple[np.ndarray, np.ndarray]:
+        xy = np.atleast_2d(np.asarray(xy, dtype=np.float64))
+        occ, grad = np.zeros(len(xy)), np.zeros((len(xy), 2))
+        if self.team is not None and len(self.team):
+            occ, grad = self.team.gradient(xy)
+            roomy = self.explorer.roomy(xy, self.space)
+            occ[roomy], grad[roomy] = 0.0, 0.0
+        if self.live is not None and len(self.live):
+            o, g = self.live.gradient(xy)
+            more = o > occ
+            occ[more], grad[more] = o[more], g[more]
+        return occ, grad
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)

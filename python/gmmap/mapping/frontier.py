@@ -1,0 +1,232 @@
+"""Free space and frontiers from what crosses the wire: GMM submaps plus free-space horizons.
+
+A GMM says where surfaces are, not where the sensor looked: space without components may be
+free or never seen. The smallest addition that says which is a *horizon*: from a viewpoint on
+the robot's path, how far the sensor saw free space in each of ``bins`` horizontal directions,
+through the height band the robot's body occupies. Bytes: 4 for the viewpoint (cm, int16, in
+the submap's anchor frame) and one per direction (0: not seen; k: free for k x 10 cm), about 76
+per viewpoint before deflate. Free space is the union of the horizons' star-shaped polygons;
+a direction's free range is the nearest return in the band (an obstacle), else the farthest
+floor return (free that far, nothing in the band), never a guess about a direction not seen.
+
+Frontiers are where known free space meets space nobody has seen: just past the end of a
+direction that did not end on a surface (the GMM occupancy field tells which did), and beside
+a seen direction whose neighbour was not seen (a depth camera's narrow view). Each comes with a
+*target*, a point inside the same horizon, so the straight line from the horizon's viewpoint to
+the target is observed free space: exploration routes run between viewpoints, without a grid.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from gmmap.errors import FileFormatError, InvalidInputError
+
+RANGE_STEP = 0.1  # metres per range unit on the wire
+MAX_CODE = 255
+Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
+
+
+@dataclass
+class Horizon:
+    """Free range (m) per direction from ``origin`` (x, y), NaN where not seen; direction b
+    covers [b, b + 1) x 2pi / bins about +z, in the frame ``origin`` is in."""
+
+    origin: np.ndarray
+    ranges: np.ndarray
+
+    def moved(self, T: np.ndarray) -> Horizon:
+        """This horizon in another frame: ``T`` (4x4, levelled: a rotation about z)."""
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        shift = round(yaw / (2 * math.pi / len(self.ranges)))
+        origin = T[:2, :2] @ self.origin + T[:2, 3]
+        # Rotating by whole bins keeps the ranges exact; the remainder (< half a bin) is the
+        # error this representation accepts.
+        return Horizon(origin, np.roll(self.ranges, shift))
+
+
+def horizon_from(
+    points_xyz: np.ndarray,
+    origin: np.ndarray,
+    band: tuple[float, float],
+    bins: int,
+    floor: float = 0.05,
+) -> np.ndarray:
+    """Free range per direction (NaN: not seen) from ``origin`` (x, y), for (N, 3) points in a
+    levelled frame whose z = 0 is the floor: the nearest return in ``band``, else the farthest
+    floor return (z under ``floor``); returns above the band say nothing about it."""
+    p = np.asarray(points_xyz, dtype=np.float64)
+    d = p[:, :2] - origin
+    r = np.hypot(d[:, 0], d[:, 1])
+    b = (np.floor(np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins).astype(int)) % bins
+    out = np.full(bins, np.nan)
+    low = p[:, 2] < max(floor, band[0])
+    hit = (p[:, 2] >= band[0]) & (p[:, 2] <= band[1]) & ~low
+    if low.any():
+        far = np.zeros(bins)
+        np.maximum.at(far, b[low], r[low])
+        out[far > 0] = far[far > 0]
+    if hit.any():
+        near = np.full(bins, np.inf)
+        np.minimum.at(near, b[hit], r[hit])
+        out[np.isfinite(near)] = near[np.isfinite(near)]
+    return out
+
+
+def merge_ranges(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Two views from (about) one viewpoint: the nearer free range where both saw a direction
+    (a return in one is an obstacle the other may have missed)."""
+    return np.where(np.isnan(a), b, np.where(np.isnan(b), a, np.fmin(a, b)))
+
+
+def encode_horizons(horizons: Sequence[Horizon]) -> bytes:
+    """Wire form: count, bins, then per horizon int16 cm x, y and uint8 codes; deflated."""
+    bins = len(horizons[0].ranges) if horizons else 0
+    raw = bytearray(struct.pack("<HH", len(horizons), bins))
+    for h in horizons:
+        if len(h.ranges) != bins:
+            raise InvalidInputError("every horizon of a submap has the same number of bins")
+        x, y = (int(np.clip(round(v * 100), -32768, 32767)) for v in h.origin)
+        codes = np.where(
+            np.isnan(h.ranges),
+            0,
+            np.clip(np.floor(np.nan_to_num(h.ranges) / RANGE_STEP), 1, MAX_CODE),
+        )
+        raw += struct.pack("<hh", x, y) + codes.astype(np.uint8).tobytes()
+    return zlib.compress(bytes(raw), 9)
+
+
+def decode_horizons(data: bytes) -> list[Horizon]:
+    """The horizons of `encode_horizons`; FileFormatError on anything else."""
+    try:
+        raw = zlib.decompress(data)
+        n, bins = struct.unpack_from("<HH", raw)
+    except (zlib.error, struct.error) as exc:
+        raise FileFormatError(f"not a horizon block: {exc}") from exc
+    size = 4 + bins
+    if bins < 4 or len(raw) != 4 + n * size:
+        raise FileFormatError(f"horizon block: {len(raw)} bytes for {n} x {bins} bins")
+    out = []
+    for i in range(n):
+        x, y = struct.unpack_from("<hh", raw, 4 + i * size)
+        codes = np.frombuffer(raw, np.uint8, bins, 4 + i * size + 4).astype(float)
+        out.append(
+            Horizon(np.array([x, y]) / 100.0, np.where(codes == 0, np.nan, codes * RANGE_STEP))
+        )
+    return out
+
+
+@dataclass
+class Frontier:
+    """A cluster of frontier points: ``goal`` (a target inside known free space), the horizon
+    whose viewpoint sees it in a straight line, and ``size`` (points: a proxy for the unknown
+    area it opens)."""
+
+    goal: np.ndarray
+    horizon: int
+    size: int
+
+
+class FreeSpace:
+    """The union of horizons (all in one frame)."""
+
+    def __init__(self, horizons: Sequence[Horizon]) -> None:
+        self.horizons = list(horizons)
+        self.bins = len(self.horizons[0].ranges) if self.horizons else 72
+        self.origins = np.array([h.origin for h in self.horizons]).reshape(-1, 2)
+        self.ranges = np.array([h.ranges for h in self.horizons]).reshape(-1, self.bins)
+
+    def __len__(self) -> int:
+        return len(self.horizons)
+
+    def _bin(self, angle: np.ndarray) -> np.ndarray:
+        return np.floor(angle / (2 * math.pi) * self.bins).astype(int) % self.bins
+
+    def contains(self, xy: object, shrink: float = 0.0, near: float = 30.0) -> np.ndarray:
+        """Whether each (N, 2) point is known free: inside some horizon by ``shrink`` m."""
+        pts = np.atleast_2d(np.asarray(xy, dtype=np.float64))
+        inside = np.zeros(len(pts), dtype=bool)
+        if not len(self) or not len(pts):
+            return inside
+        for start in range(0, len(pts), 2048):
+            chunk = pts[start : start + 2048]
+            d = chunk[:, None, :] - self.origins[None]
+            r = np.hypot(d[..., 0], d[..., 1])
+            b = self._bin(np.arctan2(d[..., 1], d[..., 0]))
+            lim = self.ranges[np.arange(len(self))[None], b]
+            ok = (r < np.nan_to_num(lim, nan=-1.0) - shrink) & (r < near)
+            inside[start : start + 2048] = ok.any(axis=1)
+        return inside
+
+    def frontiers(
+        self, blocked: Blocked, spacing: float = 0.5, back: float = 0.4, link: float = 0.75
+    ) -> list[Frontier]:
+        """Frontier clusters: points just outside every horizon and not ``blocked``, each with
+        a target ``back`` m inside the horizon it was found from; points closer than ``link``
+        belong to one cluster."""
+        probes, targets, owner = self._probes(spacing, back)
+        if not len(probes):
+            return []
+        # Cheapest test first: most probes lie inside some other horizon.
+        keep = ~self.contains(probes, shrink=-0.05)
+        probes, targets, owner = probes[keep], targets[keep], owner[keep]
+        keep = ~blocked(probes) & ~blocked(targets)
+        probes, targets, owner = probes[keep], targets[keep], owner[keep]
+        if not len(probes):
+            return []
+        # Single linkage: a long occlusion edge is one frontier, however far it runs.
+        pairs = cKDTree(probes).query_pairs(link, output_type="ndarray")
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(probes),) * 2)
+        _, label = connected_components(graph, directed=False)
+        out = []
+        for c in np.unique(label):
+            idx = np.flatnonzero(label == c)
+            centre = probes[idx].mean(axis=0)
+            pick = idx[np.argmin(np.linalg.norm(probes[idx] - centre, axis=1))]
+            out.append(Frontier(targets[pick], int(owner[pick]), len(idx)))
+        return out
+
+    def _probes(self, spacing: float, back: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Candidate frontier points with their targets and horizons: past the end of every
+        seen direction, and along every occlusion edge (a direction beside a farther seen one,
+        or beside one not seen at all) on the nearer side, each target mirrored into the
+        farther direction at the same range."""
+        width = 2 * math.pi / self.bins
+        r = self.ranges
+        seen = ~np.isnan(r)
+        h, b = np.nonzero(seen)
+        # Three probes per direction, so that a far frontier is as dense as a near one.
+        h, b = np.repeat(h, 3), np.repeat(b, 3)
+        centre = (b + 0.5 + np.tile([-1 / 3, 0.0, 1 / 3], len(h) // 3)) * width
+        u = np.stack([np.cos(centre), np.sin(centre)], -1)
+        probes = [self.origins[h] + (r[h, b] + 0.3)[:, None] * u]
+        targets = [self.origins[h] + np.maximum(r[h, b] - back, 0.0)[:, None] * u]
+        owner = [h]
+        near = np.nan_to_num(r, nan=0.0)
+        for shift in (-1, 1):
+            far = np.roll(r, -shift, axis=1)  # the neighbour's range
+            edge = ~np.isnan(far) & (far - back > near + 0.3 + spacing)
+            h, b = np.nonzero(edge)
+            if not len(h):
+                continue
+            boundary = (b + (shift > 0)) * width
+            steps = np.arange(0.0, far[h, b].max(), spacing)
+            s = near[h, b, None] + 0.3 + steps[None]
+            ok = s < (far[h, b] - back)[:, None]
+            rows, cols = np.nonzero(ok)
+            dist = s[rows, cols]
+            hh, bb = h[rows], boundary[rows]
+            side = lambda a: np.stack([np.cos(a), np.sin(a)], -1)  # noqa: E731
+            probes.append(self.origins[hh] + dist[:, None] * side(bb - shift * 0.3 * width))
+            targets.append(self.origins[hh] + dist[:, None] * side(bb + shift * 0.3 * width))
+            owner.append(hh)
+        return np.vstack(probes), np.vstack(targets), np.concatenate(owner)
