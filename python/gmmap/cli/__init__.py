@@ -7,7 +7,20 @@ import sys
 import click
 
 from gmmap import __version__
-from gmmap.cli import bench, build, config, demo, eval, fleet, info, merge, robot, sim, station
+from gmmap.cli import (
+    bench,
+    build,
+    config,
+    demo,
+    eval,
+    explore,
+    fleet,
+    info,
+    merge,
+    robot,
+    sim,
+    station,
+)
 
 # The optional dependencies and the extra that installs each (pyproject.toml).
 EXTRAS = {
@@ -50,7 +63,7 @@ def main() -> None:
     """gmmap: multi-robot mapping with Gaussian Mixture Model submaps."""
 
 
-for module in (demo, robot, station, sim, build, merge, eval, bench, info, config, fleet):
+for module in (demo, robot, station, sim, explore, build, merge, eval, bench, info, config, fleet):
     main.add_command(module.command)
 
 if __name__ == "__main__":

@@ -48,6 +48,33 @@ def save_rerun(
     return path
 
 
+def save_paths(paths: list, dt: float, path: str | os.PathLike, curve: list | None = None) -> Path:
+    """Robots' paths ((x, y) per step, world frame) as a Rerun recording on a ``sim_time``
+    timeline: each robot's position and its path so far at every step, and the coverage
+    curve ((t, surface, area) rows) as scalars."""
+    if not available():
+        raise GmmapError("Rerun is not installed: pip install 'gmmap[viz]' (rerun-sdk)")
+    import rerun as rr
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream("gmmap-explore")
+    rec.save(str(path))
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    for robot, steps in enumerate(paths):
+        xyz = np.c_[np.asarray(steps, float).reshape(-1, 2), np.zeros(len(steps))]
+        for k in range(0, len(xyz), 5):
+            rec.set_time("sim_time", duration=k * dt)
+            rec.log(f"world/robot_{robot}/position", rr.Points3D(xyz[k : k + 1], radii=0.2))
+            rec.log(f"world/robot_{robot}/path", rr.LineStrips3D([xyz[: k + 1]]))
+    for t, surface, area in curve or []:
+        rec.set_time("sim_time", duration=t)
+        rec.log("coverage/surface", rr.Scalars(surface))
+        rec.log("coverage/area", rr.Scalars(area))
+    rec.flush()
+    return path
+
+
 def ellipsoids3d(gmms: list, sigmas: float = 2.0, **style):
     """The components of ``gmms`` as one Rerun Ellipsoids3D, each its ``sigmas`` ellipsoid."""
     import rerun as rr

@@ -2,8 +2,9 @@
 
 ``surface``: the share of the world's vertical surfaces (every 10 cm, 0.3-1.7 m above the
 floor: what a ground robot's sensor can see of walls and furniture) that lie within 10 cm of
-the team's map, placed by ground truth. Floors, ceilings and table tops are left out: a
-sensor looks along them, and they would measure the sensor's field of view, not exploration.
+the team's map, placed by ground truth (of a GMM map: inside a component's 2-sigma ellipsoid
+grown by 5 cm; of a point map: within 10 cm of a point). Floors, ceilings and table tops are
+left out: a sensor looks along them, and they would measure its field of view, not exploration.
 Samples inside or against another shape, or outside the world's bounds (the outer faces of
 its walls), cannot be seen and are not counted. ``area``: the share of the floor where a robot
 fits (a 25 cm grid, 20 cm from any shape) that the team's horizons say is free.
@@ -18,6 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gmmap.io.sim import Box, Cylinder, World
+from gmmap.math.gmm import Gmm
 
 STEP = 0.1  # metres between surface samples
 HEIGHTS = np.arange(0.3, 1.71, STEP)
@@ -74,6 +76,20 @@ class Coverage:
         self.floor = floor_samples(world)
         self.covered = np.zeros(len(self.samples), dtype=bool)
         self._tree = cKDTree(self.samples)
+
+    def add_gmm(self, gmm: Gmm) -> None:
+        """Marks the samples within 10 cm of a mixture's surfaces (world frame): inside some
+        component's 2-sigma ellipsoid once its covariance is grown by (5 cm)^2, so a surface
+        component's 2 sigma reaches 10 cm off it."""
+        covs = gmm.covariances + (WITHIN / 2) ** 2 * np.eye(3)
+        precisions = np.linalg.inv(covs)
+        reach = 2 * np.sqrt(np.linalg.eigvalsh(covs)[:, -1])
+        for mean, precision, r in zip(gmm.means, precisions, reach, strict=True):
+            idx = np.array(self._tree.query_ball_point(mean, r), dtype=int)
+            if len(idx):
+                d = self.samples[idx] - mean
+                inside = np.einsum("ni,ij,nj->n", d, precision, d) <= 4.0
+                self.covered[idx[inside]] = True
 
     def add_points(self, points_world: np.ndarray) -> None:
         if not len(points_world):

@@ -31,7 +31,6 @@ from gmmap.mapping.frontier import FreeSpace
 
 MODES = ("shared", "no-sharing", "dense")
 CLAIM_BYTES = 16  # a position and a goal, float32 (x, y) each
-SAMPLES_PER_COMPONENT = 20  # map points drawn per GMM component to measure coverage
 Progress = Callable[[str], None]
 
 
@@ -80,8 +79,8 @@ class RunResult:
 
 def starts(world: World, n: int) -> list[tuple[float, float, float]]:
     """Where ``n`` robots start, in a file 0.8 m apart along their heading (a corridor fits
-    them): about the world's ``start``, else its first route's third waypoint (an office's
-    corridor)."""
+    them), the first where the world's ``start`` is, else its first route's third waypoint
+    (an office's corridor); places without 30 cm of room are skipped."""
     if world.start is not None:
         x, y, yaw = world.start
     elif world.routes:
@@ -92,12 +91,13 @@ def starts(world: World, n: int) -> list[tuple[float, float, float]]:
         raise InvalidInputError(f"world {world.name!r} has no start and no route")
     along = np.array([math.cos(yaw), math.sin(yaw)])
     out = []
-    for i in range(n):
-        xy = np.array([x, y]) + ((n - 1) / 2 - i) * 0.8 * along
-        if world.clearance(xy[None])[0] < 0.3:
-            raise InvalidInputError(f"{world.name}: no room to start robot {i} at {xy.round(2)}")
-        out.append((float(xy[0]), float(xy[1]), yaw))
-    return out
+    for k in (0, 1, -1, 2, -2, 3, -3, 4, -4):
+        xy = np.array([x, y]) + k * 0.8 * along
+        if world.clearance(xy[None])[0] >= 0.3:
+            out.append((float(xy[0]), float(xy[1]), yaw))
+        if len(out) == n:
+            return out
+    raise InvalidInputError(f"{world.name}: no room to start {n} robots in a file at {x, y}")
 
 
 def sense(sensor: DepthCamera | Lidar, world: World, pose: np.ndarray, rng) -> np.ndarray:
@@ -184,10 +184,7 @@ class Team:
             self.coverage.add_points(shared.points_world)
         else:
             self.bytes[i] += len(encode(shared.submap)) + shared.horizon_bytes
-            s = shared.submap
-            n = SAMPLES_PER_COMPONENT * len(s.gmm)
-            pts = s.gmm.sample(n, seed=s.seq) @ s.gt_anchor[:3, :3].T + s.gt_anchor[:3, 3]
-            self.coverage.add_points(pts)
+            self.coverage.add_gmm(shared.submap.gmm.transform(shared.submap.gt_anchor))
         for j, agent in enumerate(self.agents):
             if j != i:
                 agent.receive(shared)
