@@ -334,6 +334,9 @@ class Explorer:
         fronts = [
             f for f in space.frontiers(self._blocked(live, space)) if f.size >= o.min_frontier
         ]
+        # A frontier whose target is where the robot stands is one it cannot see past.
+        here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
+        self.failed += here
         fronts = [f for f in fronts if not self._failed_near(f.goal)]
         if not fronts:
             self.route, self.status = None, "done: no frontier left that it can reach"
@@ -448,9 +451,7 @@ class Explorer:
         ):
             r.reached, r.best, r.since_best = r.reached + 1, math.inf, 0
         if r.reached == len(r.waypoints):
-            # Arrived: a frontier still there is one this robot cannot see past.
-            self.failed.append(r.goal)
-            self.route = None
+            self.route = None  # arrived: the next step chooses again
             return None
         target = r.waypoints[r.reached]
         gap = float(np.linalg.norm(target - self.position))

@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 from gmmap.errors import FileFormatError, InvalidInputError
 
 RANGE_STEP = 0.1  # metres per range unit on the wire
+BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
 MAX_CODE = 255
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
@@ -152,7 +153,8 @@ class FreeSpace:
         return np.floor(angle / (2 * math.pi) * self.bins).astype(int) % self.bins
 
     def contains(self, xy: object, shrink: float = 0.0, near: float = 30.0) -> np.ndarray:
-        """Whether each (N, 2) point is known free: inside some horizon by ``shrink`` m."""
+        """Whether each (N, 2) point is known free: inside some horizon by ``shrink`` m (or
+        within ``BODY`` of its viewpoint)."""
         pts = np.atleast_2d(np.asarray(xy, dtype=np.float64))
         inside = np.zeros(len(pts), dtype=bool)
         if not len(self) or not len(pts):
@@ -163,12 +165,12 @@ class FreeSpace:
             r = np.hypot(d[..., 0], d[..., 1])
             b = self._bin(np.arctan2(d[..., 1], d[..., 0]))
             lim = self.ranges[np.arange(len(self))[None], b]
-            ok = (r < np.nan_to_num(lim, nan=-1.0) - shrink) & (r < near)
+            ok = (r < np.fmax(np.nan_to_num(lim, nan=-1.0), BODY) - shrink) & (r < near)
             inside[start : start + 2048] = ok.any(axis=1)
         return inside
 
     def frontiers(
-        self, blocked: Blocked, spacing: float = 0.5, back: float = 0.4, link: float = 0.75
+        self, blocked: Blocked, spacing: float = 0.25, back: float = 0.4, link: float = 0.75
     ) -> list[Frontier]:
         """Frontier clusters: points just outside every horizon and not ``blocked``, each with
         a target ``back`` m inside the horizon it was found from; points closer than ``link``
@@ -179,7 +181,20 @@ class FreeSpace:
         # Cheapest test first: most probes lie inside some other horizon.
         keep = ~self.contains(probes, shrink=-0.05)
         probes, targets, owner = probes[keep], targets[keep], owner[keep]
-        keep = ~blocked(probes) & ~blocked(targets)
+        keep = ~blocked(probes)
+        probes, targets, owner = probes[keep], targets[keep], owner[keep]
+        if not len(probes):
+            return []
+        # A target against a surface moves towards its viewpoint, along the same observed line.
+        origins = self.origins[owner]
+        stuck = blocked(targets)
+        for f in (0.75, 0.5, 0.25):
+            if not stuck.any():
+                break
+            moved = origins[stuck] + f * (targets[stuck] - origins[stuck])
+            targets[np.flatnonzero(stuck)] = moved
+            stuck[np.flatnonzero(stuck)] = blocked(moved)
+        keep = ~stuck
         probes, targets, owner = probes[keep], targets[keep], owner[keep]
         if not len(probes):
             return []
@@ -220,7 +235,7 @@ class FreeSpace:
                 continue
             boundary = (b + (shift > 0)) * width
             steps = np.arange(0.0, far[h, b].max(), spacing)
-            s = near[h, b, None] + 0.3 + steps[None]
+            s = np.maximum(near[h, b], BODY)[:, None] + 0.3 + steps[None]
             ok = s < (far[h, b] - back)[:, None]
             rows, cols = np.nonzero(ok)
             dist = s[rows, cols]

@@ -6,8 +6,9 @@ the team's map, placed by ground truth (of a GMM map: inside a component's 2-sig
 grown by 5 cm; of a point map: within 10 cm of a point). Floors, ceilings and table tops are
 left out: a sensor looks along them, and they would measure its field of view, not exploration.
 Samples inside or against another shape, or outside the world's bounds (the outer faces of
-its walls), cannot be seen and are not counted. ``area``: the share of the floor where a robot
-fits (a 25 cm grid, 20 cm from any shape) that the team's horizons say is free.
+its walls), cannot be seen and are not counted, nor are surfaces farther than 45 cm from the
+floor the robots can reach. ``area``: the share of that floor (a 25 cm grid, 20 cm from any
+shape, connected to where the robots start) that the team knows is free.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from gmmap.io.sim import Box, Cylinder, World
@@ -60,20 +62,31 @@ def surface_samples(world: World) -> np.ndarray:
     return p[free]
 
 
-def floor_samples(world: World, clearance: float = 0.2) -> np.ndarray:
-    """(N, 2) points of the floor where a robot fits, every 25 cm."""
+def floor_samples(
+    world: World, starts: np.ndarray, clearance: float = 0.2, cell: float = 0.25
+) -> np.ndarray:
+    """(N, 2) points of the floor where a robot fits and that it can reach from ``starts``
+    ((M, 2)), every ``cell`` m (the part of a world's bounds outside its walls is not)."""
     lo, hi = world.bounds()
-    xs, ys = np.arange(lo[0] + 0.125, hi[0], 0.25), np.arange(lo[1] + 0.125, hi[1], 0.25)
-    xy = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    return xy[world.clearance(xy, (0.05, 1.2)) > clearance]
+    xs, ys = np.arange(lo[0] + cell / 2, hi[0], cell), np.arange(lo[1] + cell / 2, hi[1], cell)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1)
+    fits = (world.clearance(grid.reshape(-1, 2), (0.05, 1.2)) > clearance).reshape(grid.shape[:2])
+    labels, _ = ndimage.label(fits)
+    at = np.floor((np.atleast_2d(starts) - lo[:2]) / cell).astype(int)
+    mine = {int(labels[i, j]) for i, j in at if 0 <= i < len(xs) and 0 <= j < len(ys)} - {0}
+    return grid[np.isin(labels, list(mine))]
 
 
 class Coverage:
-    """Covered surface samples, updated as map points (world frame) arrive."""
+    """Covered surface samples, updated as maps (world frame) arrive. Only what robots
+    starting at ``starts`` can reach counts: the floor connected to them and the surfaces
+    within 45 cm of it."""
 
-    def __init__(self, world: World) -> None:
-        self.samples = surface_samples(world)
-        self.floor = floor_samples(world)
+    def __init__(self, world: World, starts: np.ndarray) -> None:
+        self.floor = floor_samples(world, starts)
+        samples = surface_samples(world)
+        near = cKDTree(self.floor).query(samples[:, :2], distance_upper_bound=0.45)[0]
+        self.samples = samples[np.isfinite(near)]
         self.covered = np.zeros(len(self.samples), dtype=bool)
         self._tree = cKDTree(self.samples)
 

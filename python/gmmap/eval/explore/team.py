@@ -128,7 +128,7 @@ class Team:
 
             self.grid = DenseGrid(self.bodies[0].xy, config.planner.z_band)
         self.agents = [self._agent(i) for i in range(self.n)]
-        self.coverage = Coverage(self.world)
+        self.coverage = Coverage(self.world, np.array([b.xy for b in self.bodies]))
         self.bytes = [0] * self.n
         self.rng = np.random.default_rng([sim.seed, 0xE4])
 

@@ -1,0 +1,205 @@
+"""Exploration: horizons on the wire, frontiers, and simulated robots exploring small worlds
+with a short-range LiDAR (so that they must move to see), measured against the true world."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gmmap.cli import main
+from gmmap.config import Config
+from gmmap.errors import FileFormatError, InvalidInputError
+from gmmap.eval.explore.coverage import Coverage
+from gmmap.eval.explore.team import run_explore
+from gmmap.io.sim import World
+from gmmap.io.sim.world import slab, wall
+from gmmap.mapping.frontier import (
+    FreeSpace,
+    Horizon,
+    decode_horizons,
+    encode_horizons,
+    horizon_from,
+)
+from gmmap.math.gmm import Gmm
+from gmmap.options import ExploreOptions
+
+
+def closed(name: str, x1: float, y1: float, inner: list, start) -> World:
+    shapes = [slab(0, 0, x1, y1, -0.025)]
+    for a, b in (((0, 0), (x1, 0)), ((x1, 0), (x1, y1)), ((x1, y1), (0, y1)), ((0, y1), (0, 0))):
+        shapes += wall(*a, *b)
+    return World(name, shapes + inner, start=start)
+
+
+def corridor() -> World:
+    """A 1.6 m wide corridor, 16 m long; the robots start in its middle."""
+    return closed("corridor", 16.0, 1.6, [], (8.0, 0.8, 0.0))
+
+
+def two_rooms() -> World:
+    """Two 5 x 5 m rooms either side of a 2 m hall, a door into each; start in the hall."""
+    inner = wall(5.0, 0, 5.0, 5.0, doors=((2.5, 1.0),)) + wall(
+        7.0, 0, 7.0, 5.0, doors=((2.5, 1.0),)
+    )
+    return closed("two-rooms", 12.0, 5.0, inner, (6.0, 1.2, np.pi / 2))
+
+
+def config(world: str, robots: int, budget: float = 200.0, reach: float = 5.0) -> Config:
+    base = Config()
+    return replace(
+        base,
+        sim=replace(base.sim, world=world, robots=robots, sensor="lidar", lidar_range=reach),
+        explore=replace(base.explore, time_budget=budget),
+    )
+
+
+def saved(world: World, tmp_path) -> str:
+    path = tmp_path / f"{world.name}.json"
+    world.save(path)
+    return str(path)
+
+
+# ---- horizons and frontiers -----------------------------------------------------------------
+
+
+def test_a_horizon_keeps_the_nearest_return_and_leaves_unseen_directions_unknown():
+    pts = np.array([[2.0, 0.05, 0.5], [3.0, 0.05, 0.5], [0.0, 1.5, 0.0], [0.0, 4.0, 2.5]])
+    r = horizon_from(pts, np.zeros(2), (0.05, 1.2), 72)
+    assert r[0] == pytest.approx(2.0, abs=1e-3)  # the nearer wall point in the band
+    assert r[18] == pytest.approx(1.5)  # a floor return: free that far
+    assert np.isnan(r[36]) and np.isnan(r[54])  # nothing seen; above the band says nothing
+
+
+def test_horizons_round_trip_the_wire_and_garbage_is_a_typed_error():
+    ranges = np.full(72, np.nan)
+    ranges[:10] = np.linspace(0.5, 12.0, 10)
+    h = [Horizon(np.array([1.23, -4.56]), ranges), Horizon(np.zeros(2), np.full(72, 3.0))]
+    data = encode_horizons(h)
+    back = decode_horizons(data)
+    assert len(data) < 2 * 76
+    assert np.allclose(back[0].origin, [1.23, -4.56])
+    assert np.array_equal(np.isnan(back[0].ranges), np.isnan(ranges))
+    assert np.nanmax(np.abs(back[0].ranges - ranges)) <= 0.1 + 1e-9  # floored to 10 cm
+    for bad in (b"", b"not a horizon", data[:-3]):
+        with pytest.raises(FileFormatError):
+            decode_horizons(bad)
+
+
+def test_free_space_is_inside_some_horizon_and_frontiers_lie_beside_it():
+    ranges = np.full(72, np.nan)
+    ranges[:18] = 4.0  # a quarter of the view, 4 m deep, nothing blocks it
+    space = FreeSpace([Horizon(np.zeros(2), ranges)])
+    assert space.contains([[1.0, 1.0], [3.0, 0.5]]).all()
+    assert not space.contains([[-1.0, 1.0], [5.0, 0.5]]).any()
+    fronts = space.frontiers(lambda xy: np.zeros(len(xy), bool))
+    assert fronts and all(space.contains(f.goal[None])[0] for f in fronts)
+    # Walls all round the view: nothing is left to explore.
+    assert space.frontiers(lambda xy: ~space.contains(xy, shrink=0.2)) == []
+
+
+def test_explore_options_are_checked():
+    with pytest.raises(InvalidInputError):
+        ExploreOptions(bins=4)
+    with pytest.raises(InvalidInputError):
+        ExploreOptions(time_budget=0)
+
+
+# ---- coverage is measured against the true world --------------------------------------------
+
+
+def test_coverage_counts_the_true_world_not_the_map():
+    world = two_rooms()
+    truth = Coverage(world, np.array([[6.0, 1.2]]))
+    samples = truth.samples
+    on_walls = Gmm(
+        np.full(len(samples), 1 / len(samples)),
+        samples,
+        np.tile(np.eye(3) * 1e-4, (len(samples), 1, 1)),
+    )
+    moved = Coverage(world, np.array([[6.0, 1.2]]))
+    moved.add_gmm(
+        on_walls.transform(np.array([[1, 0, 0, 0.5], [0, 1, 0, 0.5], [0, 0, 1, 0], [0, 0, 0, 1.0]]))
+    )
+    truth.add_gmm(on_walls)
+    assert truth.surface > 0.99
+    assert moved.surface < 0.3  # a map half a metre off covers little of the world
+
+
+# ---- simulated robots exploring -------------------------------------------------------------
+
+
+def test_a_robot_in_a_corridor_reaches_one_end_and_turns_back_to_the_other(tmp_path):
+    """A 5 m LiDAR sees an end wall from 5 m: the robot must go that near each end."""
+    r = run_explore(config(saved(corridor(), tmp_path), 1))
+    xs = np.array(r.paths[0])[:, 0]
+    near_end = (xs < 5.0) | (xs > 11.0)
+    assert near_end.any(), "it never reached an end"
+    first = int(np.argmax(near_end))
+    later = xs[first:]
+    assert ((later > 11.0) if xs[first] < 8.0 else (later < 5.0)).any(), "it did not turn back"
+    assert r.collisions == 0
+    assert r.statuses[0].startswith("done")
+    assert r.coverage > 0.9 and r.area > 0.9
+
+
+def test_two_robots_in_two_rooms_end_in_different_rooms(tmp_path):
+    r = run_explore(config(saved(two_rooms(), tmp_path), 2))
+    assert r.collisions == 0
+    ends = [np.array(p[-1]) for p in r.paths]
+    rooms = sorted("west" if e[0] < 5.0 else "east" if e[0] > 7.0 else "hall" for e in ends)
+    assert rooms == ["east", "west"], f"ended at {ends}"
+    assert r.coverage > 0.9
+
+
+def test_a_goal_behind_a_wall_is_reached_around_it():
+    """The corner world's second arm is behind the wall the robot starts beside: it gets there
+    by the corner, never through the wall."""
+    r = run_explore(config("corner", 1))
+    path = np.array(r.paths[0])
+    assert r.collisions == 0
+    assert (path[:, 1] > 3.0).any(), "it never entered the far arm"
+    assert r.area > 0.9 and r.coverage > 0.75
+
+
+def test_a_robot_boxed_in_stops_with_a_clear_status(tmp_path):
+    box = closed("box", 2.0, 2.0, [], (1.0, 1.0, 0.0))
+    r = run_explore(config(saved(box, tmp_path), 1, budget=60.0))
+    assert r.sim_time_s < 30.0
+    assert r.statuses == ["done: no frontier left that it can reach"]
+    assert r.collisions == 0
+
+
+def test_the_cli_reports_the_run_and_its_baselines(tmp_path):
+    world = saved(closed("room", 4.0, 3.0, [], (2.0, 1.5, 0.0)), tmp_path)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        main,
+        [
+            "explore",
+            "--world",
+            world,
+            "--robots",
+            "2",
+            "--time-budget",
+            "40",
+            "--json",
+            "--out",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    keys = {"coverage", "time_to_90_s", "collisions", "bytes_per_robot", "robots", "world"}
+    assert keys <= set(report)
+    assert set(report["baselines"]) == {"alone", "no_sharing", "dense"}
+    for run in (report, *report["baselines"].values()):
+        assert keys <= set(run) and run["collisions"] == 0
+    assert report["baselines"]["alone"]["robots"] == 1
+    assert sum(report["baselines"]["dense"]["bytes_per_robot"]) > 20 * sum(
+        report["bytes_per_robot"]
+    )
+    assert (out / "result.json").exists() and (out / "coverage.png").exists()
