@@ -7,8 +7,8 @@ gmmap sends a submap. Every robot integrates every cloud into the same grid (ray
 height band the robot occupies mark cells free, their ends occupied), so the team's grid is
 computed once. The frames between robots are given (an upper bound on what a dense system
 would know). Goals: the nearest frontier cluster (free cells beside unknown ones) by Dijkstra
-over cells a robot fits through; robots follow the grid path, with the same claims and
-spreading rule as the GMM explorers.
+over cells a robot fits through; robots follow the grid path with the same local planner, claims
+and spreading rule as the GMM explorers (the planner on the grid's occupied cells).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from gmmap import _core
 from gmmap.config import Config
 from gmmap.mapping.explore import ARRIVED, STUCK_STEPS, Claim
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.planner import GradientPlanner, OccupancyField
+from gmmap.math.gmm import Gmm
 
 CELL = 0.05
 SIZE = 1600  # cells per side: 80 m around the first robot's start
@@ -98,6 +100,7 @@ class DenseExplorer:
         self.goal: np.ndarray | None = None
         self.status = "exploring"
         self._chosen_at, self._reached, self._best, self._since = -math.inf, 0, math.inf, 0
+        self._planner: GradientPlanner | None = None
 
     # ---- the interface the team loop drives (as `gmmap.mapping.explore.Explorer`) ----------
 
@@ -168,16 +171,35 @@ class DenseExplorer:
             self.failed.append(self.goal)
             self.path = self.goal = None
             return None
-        gap = self.path[self._reached] - self.position
-        dist = float(np.linalg.norm(gap))
+        target = self.path[self._reached]
+        dist = float(np.linalg.norm(target - self.position))
         self._best, self._since = (
             (dist, 0) if dist < self._best - 0.05 else (self._best, self._since + 1)
         )
-        if self._since >= STUCK_STEPS:
+        direction = None
+        if self._since < STUCK_STEPS:
+            if self._planner is None:
+                self._planner = GradientPlanner(None, self.config.planner, self._field())
+            self._planner.field = self._field()
+            direction = self._planner.choose(self.position, target)
+        if direction is None:
             self.failed.append(self.goal)
             self.path = self.goal = None
             return None
-        return self.map_to_world[:2, :2].T @ (gap / dist)
+        return self.map_to_world[:2, :2].T @ direction
+
+    def _field(self) -> OccupancyField:
+        """The occupied cells within 3 m as small components: the same local planner as the
+        GMM explorers steers the dense robots (on the grid's surfaces instead of mixtures)."""
+        g = self.grid
+        c = g.index(self.position[None])[0]
+        r = int(3.0 / CELL)
+        lo = np.maximum(c - r, 0)
+        cells = np.argwhere(g.cells[lo[0] : c[0] + r, lo[1] : c[1] + r] == OCCUPIED) + lo
+        xy = g.centre_of(cells) if len(cells) else np.zeros((1, 2)) + 1e6
+        means = np.c_[xy, np.full(len(xy), 0.5)]
+        covs = np.tile(np.eye(3) * CELL**2, (len(xy), 1, 1))
+        return OccupancyField(Gmm(np.full(len(xy), 1 / len(xy)), means, covs), self.config.planner)
 
     def _choose(self) -> None:
         g = self.grid
@@ -185,9 +207,14 @@ class DenseExplorer:
         lo, hi = known.min(axis=0) - 2, known.max(axis=0) + 3
         sub = g.cells[lo[0] : hi[0], lo[1] : hi[1]]
         p = self.config.planner
-        clear = ndimage.distance_transform_edt(sub != OCCUPIED) * CELL > p.robot_radius + p.margin
-        passable = (sub == FREE) & clear
+        # A cell's centre may lie half a cell nearer a surface than its occupied cell's.
+        gap = ndimage.distance_transform_edt(sub != OCCUPIED) * CELL
+        passable = (sub == FREE) & (gap > p.robot_radius + p.margin)
         start = g.index(self.position[None])[0] - lo
+        # Where it stands is passable, and the free cells about it: it may stand in a margin.
+        ii, jj = np.ogrid[: sub.shape[0], : sub.shape[1]]
+        near = (ii - start[0]) ** 2 + (jj - start[1]) ** 2 <= (0.3 / CELL) ** 2
+        passable |= near & (sub == FREE)
         passable[start[0], start[1]] = True
         unknown = sub == UNKNOWN
         beside = ndimage.binary_dilation(unknown, np.ones((3, 3), bool))
@@ -224,10 +251,10 @@ class DenseExplorer:
             self.status = "stopped: no frontier reachable on the grid"
             return
         cells = _walk_back(pred, best_cell, sub.shape, start)
-        pts = g.centre_of(cells[::10] + lo)
+        pts = g.centre_of(cells[::10] + lo)  # every 50 cm
         self.path = np.vstack([pts[1:], best[None]]) if len(pts) > 1 else best[None]
         self.goal, self.status = best, "exploring"
-        self._reached, self._best, self._since = 0, math.inf, 0
+        self._reached, self._best, self._since, self._planner = 0, math.inf, 0, None
 
     def _crowding(self, goal: np.ndarray) -> float:
         cost, mine = 0.0, float(np.linalg.norm(goal - self.position))

@@ -42,6 +42,7 @@ class Body:
     yaw: float
     path: list[list[float]] = field(default_factory=list)
     collisions: int = 0
+    blocked: bool = False
 
     def pose(self) -> np.ndarray:
         T = np.eye(4)
@@ -211,9 +212,13 @@ class Team:
         body.yaw += max(-opt.turn_rate * dt, min(opt.turn_rate * dt, error))
         target = body.xy + self.config.sim.speed * dt * d
         radius = self.config.planner.robot_radius
-        if self.world.clearance(target[None], self.config.planner.z_band)[0] < radius:
-            body.collisions += 1
-        else:
+        # A collision is a bump: a step refused right after a step taken (pushing on is not
+        # another one).
+        gap = self.world.clearance(np.array([target, body.xy]), self.config.planner.z_band)
+        bump = bool(gap[0] < radius and gap[0] < gap[1])  # backing off a surface is allowed
+        body.collisions += int(bump and not body.blocked)
+        body.blocked = bump
+        if not bump:
             body.xy = target
         return True
 
