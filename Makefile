@@ -35,7 +35,7 @@ lint: install
 	$(BIN)/ruff format --check python tests benchmarks
 
 # Every benchmark prints one JSON object; docs/benchmarks.md is generated from them.
-BENCHMARKS := em raycast loaders selection codec registration place merge backend planner fleet channel security live ros1 ros2 station
+BENCHMARKS := em raycast loaders selection codec registration place merge backend planner explore fleet channel security live ros1 ros2 station
 
 bench: install
 	for b in $(BENCHMARKS); do $(BIN)/python benchmarks/$$b.py > bench-$$b.json || exit 1; done

@@ -203,3 +203,12 @@ def test_the_cli_reports_the_run_and_its_baselines(tmp_path):
         report["bytes_per_robot"]
     )
     assert (out / "result.json").exists() and (out / "coverage.png").exists()
+
+
+def test_the_demo_explores_when_asked(tmp_path):
+    world = saved(closed("room", 4.0, 3.0, [], (2.0, 1.5, 0.0)), tmp_path)
+    args = ["demo", "--explore", "--world", world, "--robots", "2", "--json"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["robots"] == 2 and "baselines" not in report and report["coverage"] > 0.8

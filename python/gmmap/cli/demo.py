@@ -439,6 +439,12 @@ def format_report(r: dict) -> str:
     is_flag=True,
     help="Fresh fleet credentials in OUT/fleet: mutual TLS, access control, signed submaps.",
 )
+@click.option(
+    "--explore",
+    is_flag=True,
+    help="The robots explore the world instead of following routes (gmmap explore without "
+    "its baselines: one process, perfect odometry).",
+)
 @config_option
 @as_json_option
 def command(
@@ -447,6 +453,7 @@ def command(
     plots: Path | None,
     station: bool,
     secure: bool,
+    explore: bool,
     config: Config,
     as_json: bool,
 ) -> None:
@@ -454,6 +461,11 @@ def command(
 
     The pose graph's odometry noise follows the simulated drift (sim.drift, with a floor)
     unless the configuration sets the backend's odometry fields."""
+    if explore:
+        from gmmap.cli.explore import explore_and_report
+
+        explore_and_report(config, baselines=False, out=out, as_json=as_json)
+        return
     config = backend_follows_drift(config)
     r = run_demo(config, max_frames, out, log, secure=secure, station=station)
     if plots:

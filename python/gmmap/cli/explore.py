@@ -15,6 +15,7 @@ BASELINES = {"alone": ("shared", 1), "no_sharing": ("no-sharing", None), "dense"
 
 @click.command("explore")
 @sim_settings
+@setting("--lidar-range", "sim.lidar_range", "LiDAR maximum range (m).", type=float)
 @setting("--time-budget", "explore.time_budget", "Simulated seconds before a run ends.", type=float)
 @click.option(
     "--baselines/--no-baselines",
@@ -40,6 +41,11 @@ def command(baselines: bool, out: Path | None, config: Config, as_json: bool) ->
     ground truth) and the share of its floor the team knows is free. The run ends when no
     robot has a frontier left or after explore.time_budget simulated seconds.
     """
+    explore_and_report(config, baselines, out, as_json)
+
+
+def explore_and_report(config: Config, baselines: bool, out: Path | None, as_json: bool) -> None:
+    """Runs the exploration (and its baselines), writes ``out`` and prints the report."""
     from gmmap.eval.explore.team import run_explore
 
     o = config.sim
