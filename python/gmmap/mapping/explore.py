@@ -342,8 +342,12 @@ class Explorer:
             self.route, self.status = None, "done: no frontier left that it can reach"
             return
         claimed = self._claimed_goals()
+        mine = None if self.route is None else self.route.goal
         free = [
-            f for f in fronts if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
+            f
+            for f in fronts
+            if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
+            or (mine is not None and np.linalg.norm(f.goal - mine) < 1.0 and self._nearest(mine))
         ]
         fronts = free or fronts
         dist, pred, start = self._distances(space, k, live)
@@ -414,6 +418,20 @@ class Explorer:
             if T is not None and claim.goal is not None:
                 out.append(T[:2, :2] @ claim.goal + T[:2, 3])
         return out
+
+    def _nearest(self, goal: np.ndarray) -> bool:
+        """Whether no joined peer is nearer ``goal`` than this robot: then a goal it already
+        heads for stays its own, whoever claimed it since (two robots do not swap back and
+        forth)."""
+        mine = float(np.linalg.norm(goal - self.position))
+        for robot, claim in self.claims.items():
+            T = self._peer_frame(robot)
+            if (
+                T is not None
+                and np.linalg.norm(goal - (T[:2, :2] @ claim.position + T[:2, 3])) < mine
+            ):
+                return False
+        return True
 
     def _crowding(self, goal: np.ndarray) -> float:
         """A cost for goals nearer a joined peer than this robot: robots spread out."""
