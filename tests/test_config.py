@@ -26,7 +26,7 @@ def test_the_cli_dump_is_the_defaults(tmp_path):
     tree = yaml.safe_load(result.stdout)
     assert list(tree) == [
         "build", "select", "register", "place", "backend", "transport", "link", "robot",
-        "security", "station", "ros", "planner", "sim",
+        "security", "station", "ros", "planner", "explore", "sim",
     ]  # fmt: skip
     assert Config.from_dict(tree) == Config()
 

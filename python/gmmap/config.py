@@ -1,6 +1,7 @@
 """The one configuration tree: YAML in, flags override it, the effective tree dumped beside results.
 
-    build, select, register, place, backend, transport, link, robot, planner, sim
+    build, select, register, place, backend, transport, link, robot, security, station, ros,
+    planner, explore, sim
 
 Each section is a dataclass of `gmmap.options`, where each setting has its one default.
 ``gmmap config --dump`` prints the defaults; every command takes ``--config FILE`` (a partial

@@ -6,13 +6,15 @@ submaps in its own map frame by the frames its `Mapper` finds between robots, so
 robots have joined their maps each explores alone, and after, they share one frontier set.
 
 Choosing a goal: the frontiers of the union of every known horizon, minus those behind a
-surface (the GMM occupancy field), those a peer has claimed (its goal within
-``claim_radius``) and those that failed before. A route runs through the graph of
-viewpoints: consecutive viewpoints of one robot (it drove between them) and viewpoints within
-``link_radius`` whose straight line is known free and clear; a frontier's cost is the route to
-the viewpoint that saw it plus the straight, observed line to its target. Moving: the GMM
-gradient planner steers towards the next waypoint on the team's field and on a field of what
-the sensor saw since the last submap (a robot avoids what it has just seen, shared or not).
+surface (the GMM occupancy field), those a joined peer heads for (its goal within
+``claim_radius``, unless this robot heads there already and is nearer) and those given up. A
+route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
+between them) and viewpoints within ``link_radius`` whose straight line is known free; a
+frontier's cost is the route to the viewpoint that saw it plus the straight, observed line to
+its target. Moving: the GMM gradient planner steers towards the next waypoint on the team's
+field, zero where the robot's footprint is known free (EM spans a doorway with the wall's
+components; the horizons saw through it), and on a field of what the sensor saw since the
+last-but-one submap (a robot avoids what it has just seen, shared or not).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from gmmap.math.points import voxel_filter
 
 Node = tuple[str, int]
 ARRIVED = 0.35  # metres from a waypoint that count as there
-STUCK_STEPS = 24
+STUCK_STEPS = 24  # steps without getting closer to the waypoint before a goal is given up
 RING = np.linspace(0, 2 * math.pi, 8, endpoint=False)  # footprint test points
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
 

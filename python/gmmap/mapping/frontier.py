@@ -10,10 +10,12 @@ a direction's free range is the nearest return in the band (an obstacle), else t
 floor return (free that far, nothing in the band), never a guess about a direction not seen.
 
 Frontiers are where known free space meets space nobody has seen: just past the end of a
-direction that did not end on a surface (the GMM occupancy field tells which did), and beside
-a seen direction whose neighbour was not seen (a depth camera's narrow view). Each comes with a
-*target*, a point inside the same horizon, so the straight line from the horizon's viewpoint to
-the target is observed free space: exploration routes run between viewpoints, without a grid.
+direction that did not end on a surface (the GMM occupancy field tells which did), and along
+occlusion edges, beside a direction whose neighbour saw farther or was not seen at all (a
+doorway, a depth camera's narrow view). Each comes with a *target*, a point inside the same
+horizon, so the straight line from the horizon's viewpoint to the target is observed free
+space: exploration routes run between viewpoints, without a grid. The disc of ``BODY`` about
+a viewpoint counts as free whatever was seen: the robot stood there.
 """
 
 from __future__ import annotations
