@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from gmmap.config import Config
 from gmmap.mapping.frame import Frame
-from gmmap.mapping.frontier import FreeSpace, Horizon, encode_horizons, horizon_from, merge_ranges
+from gmmap.mapping.frontier import FreeSpace, Horizon, HorizonRecorder, encode_horizons
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.planner import GradientPlanner, OccupancyField
 from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
@@ -74,38 +74,6 @@ class Route:
     best: float = math.inf
     since_best: int = 0
     planner: GradientPlanner | None = None
-
-
-class HorizonRecorder:
-    """The horizons of a robot's path since its last submap, in its map frame."""
-
-    def __init__(self, bins: int, spacing: float, band: tuple[float, float]) -> None:
-        self.bins, self.spacing, self.band = bins, spacing, band
-        self.closed: list[Horizon] = []
-        self.current: Horizon | None = None
-
-    def add(self, frame: Frame) -> None:
-        pose = frame.pose
-        pts = np.asarray(frame.points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
-        origin = pose[:2, 3].copy()
-        if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
-            self.closed.append(self.current)
-            self.current = None
-        if self.current is None:
-            self.current = Horizon(origin, np.full(self.bins, np.nan))
-        seen = horizon_from(pts, self.current.origin, self.band, self.bins)
-        self.current.ranges = merge_ranges(self.current.ranges, seen)
-
-    def all(self) -> list[Horizon]:
-        return self.closed + ([self.current] if self.current is not None else [])
-
-    def take(self, anchor: np.ndarray) -> list[Horizon]:
-        """The horizons so far, moved into ``anchor``'s frame; the next submap starts afresh
-        (its first viewpoint is where this one's last was)."""
-        inverse = np.linalg.inv(anchor)
-        out = [h.moved(inverse) for h in self.all()]
-        self.closed, self.current = [], None
-        return out
 
 
 @dataclass

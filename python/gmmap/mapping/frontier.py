@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from gmmap.errors import FileFormatError, InvalidInputError
+from gmmap.mapping.frame import Frame
 
 RANGE_STEP = 0.1  # metres per range unit on the wire
 BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
@@ -126,6 +127,38 @@ def decode_horizons(data: bytes) -> list[Horizon]:
             Horizon(np.array([x, y]) / 100.0, np.where(codes == 0, np.nan, codes * RANGE_STEP))
         )
     return out
+
+
+class HorizonRecorder:
+    """The horizons of a robot's path since its last submap, in its map frame."""
+
+    def __init__(self, bins: int, spacing: float, band: tuple[float, float]) -> None:
+        self.bins, self.spacing, self.band = bins, spacing, band
+        self.closed: list[Horizon] = []
+        self.current: Horizon | None = None
+
+    def add(self, frame: Frame) -> None:
+        pose = frame.pose
+        pts = np.asarray(frame.points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
+        origin = pose[:2, 3].copy()
+        if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
+            self.closed.append(self.current)
+            self.current = None
+        if self.current is None:
+            self.current = Horizon(origin, np.full(self.bins, np.nan))
+        seen = horizon_from(pts, self.current.origin, self.band, self.bins)
+        self.current.ranges = merge_ranges(self.current.ranges, seen)
+
+    def all(self) -> list[Horizon]:
+        return self.closed + ([self.current] if self.current is not None else [])
+
+    def take(self, anchor: np.ndarray) -> list[Horizon]:
+        """The horizons so far, moved into ``anchor``'s frame; the next submap starts afresh
+        (its first viewpoint is where this one's last was)."""
+        inverse = np.linalg.inv(anchor)
+        out = [h.moved(inverse) for h in self.all()]
+        self.closed, self.current = [], None
+        return out
 
 
 @dataclass
