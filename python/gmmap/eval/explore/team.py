@@ -30,6 +30,7 @@ from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import FreeSpace
 
 MODES = ("shared", "no-sharing", "dense")
+FACING = 0.4  # rad: a depth camera's robot moves only within this of its heading (60° view)
 CLAIM_BYTES = 16  # a position and a goal, float32 (x, y) each
 Progress = Callable[[str], None]
 
@@ -206,10 +207,13 @@ class Team:
                     other.receive_claim(self.names[i], Claim(after.position, after.goal))
         if direction is None:
             return agent.status == "exploring"
-        # A holonomic base: it moves along the direction and turns its sensor towards it.
+        # A holonomic base: it moves along the direction and turns its sensor towards it; a
+        # depth camera's robot first turns until it faces where it goes (it sees only ahead).
         d = self.map_to_world[i][:2, :2] @ direction
         error = (math.atan2(d[1], d[0]) - body.yaw + math.pi) % (2 * math.pi) - math.pi
         body.yaw += max(-opt.turn_rate * dt, min(opt.turn_rate * dt, error))
+        if isinstance(self.sensor, DepthCamera) and abs(error) > FACING:
+            return True
         target = body.xy + self.config.sim.speed * dt * d
         radius = self.config.planner.robot_radius
         # A collision is a bump: a step refused right after a step taken (pushing on is not
