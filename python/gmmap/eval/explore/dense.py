@@ -143,9 +143,6 @@ class DenseExplorer:
     def claim(self) -> Claim:
         return Claim(self.position.copy(), None if self.goal is None else self.goal.copy())
 
-    def known_free(self, xy_world: np.ndarray) -> np.ndarray:
-        return self.grid.known_free(xy_world)
-
     # ---- goals and motion -------------------------------------------------------------------
 
     def next_direction(self, stamp: float) -> np.ndarray | None:
@@ -178,9 +175,10 @@ class DenseExplorer:
         )
         direction = None
         if self._since < STUCK_STEPS:
-            if self._planner is None:
-                self._planner = GradientPlanner(None, self.config.planner, self._field())
-            self._planner.field = self._field()
+            field = self._field()
+            if self._planner is None:  # one per path: the side it follows round a corner stays
+                self._planner = GradientPlanner(None, self.config.planner, field)
+            self._planner.field = field
             direction = self._planner.choose(self.position, target)
         if direction is None:
             self.failed.append(self.goal)
