@@ -132,7 +132,6 @@ class Team:
         self.agents = [self._agent(i) for i in range(self.n)]
         self.coverage = Coverage(self.world, np.array([b.xy for b in self.bodies]))
         self.bytes = [0] * self.n
-        self.rng = np.random.default_rng([sim.seed, 0xE4])
 
     def _agent(self, i: int):
         if self.mode == "dense":
