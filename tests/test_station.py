@@ -18,7 +18,7 @@ import pytest
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.fleet.node.station import StationNode
 from gmmap.fleet.security.access import issue_fleet
@@ -61,7 +61,7 @@ def fleet(tmp_path, frames, request):
         members = issue_fleet(tmp_path / "fleet", "f", ["a", "b"])
         members["station"] = add_member(tmp_path / "fleet", "station", role="station")
     scheme = "tls" if secure else "tcp"
-    ports = {"a": free_port(), "b": free_port()}
+    ports = {"a": listen_port(), "b": listen_port()}
     nodes = []
     for name, chunk, peers in (("a", frames[0:4], ()), ("b", frames[4:8], (ports["a"],))):
         node = RobotNode(config(tmp_path, name, ports[name], peers, members.get(name), scheme))
@@ -69,7 +69,7 @@ def fleet(tmp_path, frames, request):
         nodes.append(node)
         node.start_frames(chunk).join()
     assert wait(lambda: all(n.store.count("a") + n.store.count("b") == 4 for n in nodes), 20)
-    station = config(tmp_path, "station", free_port(), (ports["a"],), members.get("station"),
+    station = config(tmp_path, "station", listen_port(), (ports["a"],), members.get("station"),
                      scheme)  # fmt: skip
     yield nodes, station
     for node in nodes:
@@ -112,7 +112,7 @@ def browser(url: str, tmp_path):
     websocket = pytest.importorskip("websocket", reason="pip install websocket-client")
     from PIL import Image
 
-    port = free_port()
+    port = listen_port()
     args = [_chromium(), "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
             "--enable-unsafe-swiftshader", "--window-size=1280,800",
             f"--remote-debugging-port={port}", f"--user-data-dir={tmp_path / 'profile'}",
@@ -162,7 +162,7 @@ def test_the_browser_shows_the_merged_map(fleet, tmp_path):
 
     (_a, _b), config = fleet
     station = StationNode(config, sweep_s=1.0)
-    view = LiveView("station", free_port(), free_port(), tmp_path / "station.rrd")
+    view = LiveView("station", listen_port(), listen_port(), tmp_path / "station.rrd")
     station.start()
     try:
         assert wait(lambda: sum(station.report()["held"].values()) == 4, 30)
@@ -192,10 +192,10 @@ def test_byte_counts_that_are_not_such_a_message_are_dropped():
 @pytest.mark.skipif(_chromium() is None, reason="Chromium is not installed (make station)")
 @pytest.mark.skipif(not viz.available(), reason="Rerun is not installed (the viz extra)")
 def test_the_demos_station_shows_the_map_in_a_browser_while_the_demo_runs(tmp_path):
-    port = free_port()
+    port = listen_port()
     paced = tmp_path / "paced.yaml"  # frames at twice real time: the view has time to load
     paced.write_text(
-        f"sim: {{pace: 2.0}}\nstation: {{web_port: {port}, grpc_port: {free_port()}}}\n"
+        f"sim: {{pace: 2.0}}\nstation: {{web_port: {port}, grpc_port: {listen_port()}}}\n"
     )
     cmd = [sys.executable, "-c", "from gmmap.cli import main; main()", "demo", "--station",
            "--out", str(tmp_path / "out"), "--config", str(paced), "--json"]  # fmt: skip
@@ -242,4 +242,4 @@ def test_a_station_refuses_a_robots_credentials(tmp_path):
 
     members = issue_fleet(tmp_path / "fleet", "f", ["a"])
     with pytest.raises(CredentialsError, match="role station"):
-        StationNode(config(tmp_path, "a", free_port(), (), members["a"], "tls"))
+        StationNode(config(tmp_path, "a", listen_port(), (), members["a"], "tls"))
