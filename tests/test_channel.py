@@ -14,7 +14,7 @@ import pytest
 
 from gmmap.errors import TransportConfigError
 from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
-from gmmap.fleet.net.keys import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.options import TransportOptions
 
 GROUP = "udp/224.0.0.224:7447"  # the channel routes it on its loopback
@@ -68,7 +68,7 @@ def _robot(air: SharedChannel, name: str, port: int, peers: list[int], role: str
 
 
 def test_one_broadcast_reaches_both_peers_and_crosses_the_air_once(channel):
-    ports = [free_port() for _ in range(3)]
+    ports = [listen_port() for _ in range(3)]
     sender = _robot(channel, "r0", ports[0], [], "send")
     listeners = [_robot(channel, f"r{i}", ports[i], ports[:i], "listen") for i in (1, 2)]
     try:
@@ -90,7 +90,7 @@ def test_one_broadcast_reaches_both_peers_and_crosses_the_air_once(channel):
 
 
 def test_a_robot_that_missed_a_broadcast_fetches_it_over_unicast(channel):
-    ports = [free_port() for _ in range(2)]
+    ports = [listen_port() for _ in range(2)]
     sender = _robot(channel, "r0", ports[0], [], "send")
     try:
         sender.stdin.write("go\n")  # nobody listens yet: the broadcast is lost to all

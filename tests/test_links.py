@@ -29,7 +29,7 @@ from gmmap.eval.links import (
     relayed_pair,
 )
 from gmmap.eval.links.datagrams import DatagramRelay
-from gmmap.fleet.net.keys import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.fleet.storage.store import Store
 from gmmap.options import LinkOptions
 
@@ -182,7 +182,7 @@ def test_zenoh_peers_talk_through_the_relay_and_it_sees_the_framing() -> None:
             cfg.insert_json5(key, "false" if value is False else str(value))
         return cfg
 
-    port = free_port()
+    port = listen_port()
     received: list[bytes] = []
     with Relay(("127.0.0.1", port)) as relay:
         a = zenoh.open(config([f"tcp/127.0.0.1:{port}"], []))
@@ -429,7 +429,7 @@ def _through_relay(namespaces, relay_class, echo_script: str, client_script: str
     per direction, the relay's counts and what the veth pair on that side carried (packets,
     bytes)."""
     (ns_a, here_a, _, dev_a), (ns_b, _, there_b, dev_b) = namespaces
-    port = free_port()
+    port = listen_port()
     echo = [sys.executable, "-c", echo_script, there_b, str(port)]
     server = subprocess.Popen(["ip", "netns", "exec", ns_b, *echo], stdout=subprocess.PIPE)
     try:

@@ -14,7 +14,7 @@ from conftest import wait
 from gmmap.config import Config, load_config
 from gmmap.eval.links import ZENOH_NO_GOSSIP
 from gmmap.eval.registration import pose_errors
-from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.fleet.storage.store import Store
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
@@ -42,7 +42,7 @@ def robot_cmd(name, fleet, port, peers, store, report, frames, *extra):
 def test_two_robot_processes_share_submaps_and_agree_on_the_identity(tmp_path):
     """The bundled slice split in two robots (frames 0-3 and 4-7: the same desk, one mocap
     frame, so the true relative frame is the identity), each a process."""
-    pa, pb = free_port(), free_port()
+    pa, pb = listen_port(), listen_port()
     fleet = f"t{os.getpid()}"
     procs = [
         subprocess.Popen(
@@ -117,7 +117,7 @@ def node(tmp_path, name, port, peers=(), fleet="f", zenoh=None):
 
 
 def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, frames):
-    pa, pb = free_port(), free_port()
+    pa, pb = listen_port(), listen_port()
     b = node(tmp_path, "b", pb)
     b.start()
     try:
@@ -150,7 +150,7 @@ def test_restarted_robot_reloads_its_store_and_fetches_what_it_missed(tmp_path, 
 
 
 def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(tmp_path, frames):
-    pa, pb = free_port(), free_port()
+    pa, pb = listen_port(), listen_port()
     b = node(tmp_path, "b", pb)
     b.start()
     try:
@@ -161,7 +161,7 @@ def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(t
         assert wait(lambda: "a" in b.transport.peers())
         a.stop()
         assert wait(lambda: "a" not in b.transport.peers())
-        c = node(tmp_path, "c", free_port(), [pb])  # joins after a left: b hands a's submap on
+        c = node(tmp_path, "c", listen_port(), [pb])  # joins after a left: b hands a's submap on
         c.start()
         try:
             assert wait(lambda: c.store.seqs("a") == [0])
@@ -174,7 +174,7 @@ def test_the_owner_answers_fetches_a_holder_when_it_is_away_even_to_a_newcomer(t
 def test_the_end_of_a_chain_waits_for_the_last_submaps_of_the_other_end(tmp_path, frames):
     """a - b - c, and a never hears c: c maps on after a and b are done. a ends only once c's
     last submap has reached it through b, though a and b hold the same all along."""
-    pa, pb, pc = free_port(), free_port(), free_port()
+    pa, pb, pc = listen_port(), listen_port(), listen_port()
     b = node(tmp_path, "b", pb, zenoh=ZENOH_NO_GOSSIP)
     a = node(tmp_path, "a", pa, [pb], zenoh=ZENOH_NO_GOSSIP)
     c = node(tmp_path, "c", pc, [pb], zenoh=ZENOH_NO_GOSSIP)
@@ -203,7 +203,7 @@ def test_the_end_of_a_chain_waits_for_the_last_submaps_of_the_other_end(tmp_path
 def test_a_peer_that_joins_is_told_what_we_hold_and_the_others_are_not(tmp_path, frames):
     """a, b and d met holding nothing, then a and b mapped; c joins them: a and b each tell c
     alone what they hold (a put would reach the two others too), and c fetches from each."""
-    pa, pb, pd = free_port(), free_port(), free_port()
+    pa, pb, pd = listen_port(), listen_port(), listen_port()
     a, b = node(tmp_path, "a", pa), node(tmp_path, "b", pb, [pa])
     d = node(tmp_path, "d", pd, [pa, pb])
     for n in (a, b, d):
@@ -212,7 +212,7 @@ def test_a_peer_that_joins_is_told_what_we_hold_and_the_others_are_not(tmp_path,
     a.start_frames(frames[0:2]).join()
     b.start_frames(frames[2:4]).join()
     assert wait(lambda: a.store.seqs("b") == [0] and b.store.seqs("a") == [0])
-    c = node(tmp_path, "c", free_port(), [pa, pb, pd])
+    c = node(tmp_path, "c", listen_port(), [pa, pb, pd])
     c.start()
     assert wait(lambda: c.store.seqs("a") == [0] and c.store.seqs("b") == [0])
     received = c.transport.stats()["received"]
@@ -222,7 +222,7 @@ def test_a_peer_that_joins_is_told_what_we_hold_and_the_others_are_not(tmp_path,
 
 
 def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
-    pa, pb = free_port(), free_port()
+    pa, pb = listen_port(), listen_port()
     a = node(tmp_path, "a", pa, fleet="one")
     b = node(tmp_path, "b", pb, [pa], fleet="two")
     a.start()
@@ -242,7 +242,7 @@ def test_a_robot_of_another_fleet_is_ignored(tmp_path, frames):
 def test_a_fetch_asks_only_for_what_an_advert_shows_and_has_not_arrived(tmp_path):
     from gmmap.fleet.sharing import holdings
 
-    b = node(tmp_path, "b", free_port())
+    b = node(tmp_path, "b", listen_port())
     asked = []
     b.transport.fetch = lambda robot, kind, since, **_: asked.append((robot, since)) or []
     b.holdings.update("c", holdings.encode({"a": 2, "c": 3}, holdings.LINGER))

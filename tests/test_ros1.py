@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_two_robots_joined, stop_robots, wait
-from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.io import ros1bridge
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.io.datasets.tum import read_depth
@@ -33,7 +33,7 @@ pytestmark = pytest.mark.skipif(
 def roscore(tmp_path_factory):
     """One master for the module: rospy lets a process be one node, once."""
     tmp_path = tmp_path_factory.mktemp("ros")
-    port = free_port()
+    port = listen_port()
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp_path)}
     proc = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
@@ -121,7 +121,7 @@ def test_two_ros1_nodes_of_one_fleet_share_submaps_and_publish_one_tf_tree(tmp_p
 
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
     bag = write_cloud_bag(tmp_path / "two.bag", {"/a": frames[0:4], "/b": frames[4:8]})
-    ports = {"a": free_port(), "b": free_port()}
+    ports = {"a": listen_port(), "b": listen_port()}
     nodes = []
     for name, other in (("a", "b"), ("b", "a")):
         config = tmp_path / f"{name}.yaml"

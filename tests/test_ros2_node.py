@@ -12,7 +12,7 @@ import zenoh
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.io import ros2
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
@@ -67,7 +67,7 @@ def key(fmt: str, topic: str, typename: str) -> str:
 
 @pytest.mark.parametrize("fmt", ["rmw_zenoh", "bridge"])
 def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt):
-    port = free_port()
+    port = listen_port()
     outputs: dict[str, bytes] = {}
     attachments: dict[str, bytes | None] = {}
 
@@ -148,7 +148,7 @@ def test_thetf_tree_hangs_every_robots_map_under_its_groups_reference():
 
 
 def test_depth_images_with_their_camera_info_become_frames():
-    port = free_port()
+    port = listen_port()
     ts = ros2.typestore("jazzy")
     header = T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](10, 0), "camera")
     depth = np.full((6, 8), 2000, np.uint16)  # a wall 2 m ahead, in millimetres
@@ -195,7 +195,7 @@ def test_depth_images_with_their_camera_info_become_frames():
 
 
 def test_poses_from_one_tf_edge_down_to_the_clouds_frame():
-    port = free_port()
+    port = listen_port()
     options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), tf_parent="odom", key_format="bridge")
     moved = np.eye(4)
     moved[0, 3] = 1.0
@@ -230,7 +230,7 @@ def test_poses_from_one_tf_edge_down_to_the_clouds_frame():
 def test_rmw_zenoh_tools_see_the_node_its_subscriptions_and_publishers():
     """The node's liveliness tokens, as ``ros2 node list`` / ``ros2 topic list`` read them
     (rmw_zenoh's graph); none in the bridge format, and none once the bridge closes."""
-    port = free_port()
+    port = listen_port()
     with graph(port) as ros:
         options = RosOptions(connect=(f"tcp/127.0.0.1:{port}",), tf_parent="odom")
         bridge = Ros2Bridge("robot-1.a", options)

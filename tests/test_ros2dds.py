@@ -16,7 +16,7 @@ import pytest
 from conftest import assert_two_robots_joined, stop_robots, wait
 from gmmap.config import Config
 from gmmap.eval.ros2dds.bridge import missing
-from gmmap.fleet.net.transport import free_port
+from gmmap.fleet.net.keys import listen_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.io.datasets import BUNDLED_TUM_SLICE, TumRgbd
 from gmmap.io.ros2bridge import MAP_POINTS, Ros2Bridge
@@ -46,7 +46,7 @@ def play(clouds, odom, frames) -> None:
 
 
 def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_path):
-    port, dds = free_port(), domain()
+    port, dds = listen_port(), domain()
     heard: dict[str, list] = {"map": [], "status": [], "points": []}
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:4]
     with (
@@ -110,7 +110,7 @@ def test_a_mounting_sent_before_the_node_started_reaches_it_from_the_bridges_cac
     keeps its samples for a route the bridge opens later, and the bridge's publication cache
     for a subscriber that comes after that; so clouds in the camera frame are posed with a
     mounting published before the node started."""
-    port, dds = free_port(), domain()
+    port, dds = listen_port(), domain()
     mount = np.eye(4)
     mount[:3, 3] = [0.1, 0.0, 0.5]
     moved = np.eye(4)
@@ -148,7 +148,7 @@ def test_malformed_dds_samples_are_counted_and_mapping_goes_on():
     """A cloud whose data is shorter than its header says and one without x, y, z are
     rejected and counted; the good clouds around them become frames. (A String published on
     the clouds' topic never reaches the node: the bridge routes one type per topic.)"""
-    port, dds = free_port(), domain()
+    port, dds = listen_port(), domain()
     with (
         RosDdsBridge(dds, f"tcp/127.0.0.1:{port}"),
         graph.StandInNode("driver", dds) as driver,
@@ -188,8 +188,8 @@ def test_two_robots_on_two_bridges_join_and_publish_one_tf_tree(tmp_path):
     ``gmmap robot --ros2`` process behind its own bridge and DDS domain; their fleet link is
     Zenoh. A DDS subscriber in robot a's domain sees one TF edge, a/map → b/map."""
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:8]
-    fleet = {"a": free_port(), "b": free_port()}
-    ros = {"a": free_port(), "b": free_port()}
+    fleet = {"a": listen_port(), "b": listen_port()}
+    ros = {"a": listen_port(), "b": listen_port()}
     domains = {"a": domain(), "b": domain() + 1}
     edges: dict = {}
 
@@ -251,7 +251,7 @@ def test_a_bag_recorded_through_the_bridge_is_read_by_gmmap_build(tmp_path, stor
 
     from gmmap.io import datasets, ros2
 
-    port, dds = free_port(), domain()
+    port, dds = listen_port(), domain()
     frames = TumRgbd(BUNDLED_TUM_SLICE, stride=2)[0:4]
     got: list[tuple[str, int, bytes]] = []
     cfg = zenoh.Config()

@@ -11,9 +11,8 @@ import zenoh
 
 from conftest import wait
 from gmmap.config import Config
-from gmmap.fleet.net.keys import data_key
+from gmmap.fleet.net.keys import data_key, listen_port
 from gmmap.fleet.net.session import zenoh_config
-from gmmap.fleet.net.transport import free_port
 from gmmap.fleet.node.robot import RobotNode
 from gmmap.fleet.security.access import issue_fleet
 from gmmap.fleet.security.credentials import add_member, load, revoke
@@ -59,7 +58,7 @@ def node(tmp_path, name, folder, port=None, peers=(), **security) -> RobotNode:
     config = Config(
         robot=RobotOptions(name=name, fleet="f", store=str(tmp_path / f"{name}.db")),
         transport=TransportOptions(
-            port=port or free_port(), connect=[f"tls/127.0.0.1:{p}" for p in peers]
+            port=port or listen_port(), connect=[f"tls/127.0.0.1:{p}" for p in peers]
         ),
         build=BUILD,
         backend=BackendOptions(min_matches=1),
