@@ -31,14 +31,12 @@ from gmmap.config import Config
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import FreeSpace, Horizon, HorizonRecorder, encode_horizons
 from gmmap.mapping.mapper import Mapper
-from gmmap.mapping.planner import GradientPlanner, OccupancyField
+from gmmap.mapping.planner import ARRIVED, OccupancyField, Route
 from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import voxel_filter
 
 Node = tuple[str, int]
-ARRIVED = 0.35  # metres from a waypoint that count as there
-STUCK_STEPS = 24  # steps without getting closer to the waypoint before a goal is given up
 RING = np.linspace(0, 2 * math.pi, 8, endpoint=False)  # footprint test points
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
 
@@ -62,18 +60,6 @@ class Claim:
 
     position: np.ndarray
     goal: np.ndarray | None
-
-
-@dataclass
-class Route:
-    waypoints: np.ndarray
-    goal: np.ndarray
-    size: int
-    chosen_at: float
-    reached: int = 0
-    best: float = math.inf
-    since_best: int = 0
-    planner: GradientPlanner | None = None
 
 
 @dataclass
@@ -341,7 +327,7 @@ class Explorer:
             chain.append(space.origins[node])
             node = pred[node]
         waypoints = np.array([*reversed(chain), f.goal])
-        self.route = Route(waypoints, f.goal, f.size, stamp)
+        self.route = Route(waypoints, f.goal, stamp)
         self.status = "exploring"
 
     def _still_open(self, fronts: list, costs: list[float]) -> int | None:
@@ -433,21 +419,11 @@ class Explorer:
             r = self.route
         if r is None:
             return None
-        while (
-            r.reached < len(r.waypoints)
-            and np.linalg.norm(r.waypoints[r.reached] - self.position) < ARRIVED
-        ):
-            r.reached, r.best, r.since_best = r.reached + 1, math.inf, 0
-        if r.reached == len(r.waypoints):
+        target = r.next_waypoint(self.position)
+        if target is None:
             self.route = None  # arrived: the next step chooses again
             return None
-        target = r.waypoints[r.reached]
-        gap = float(np.linalg.norm(target - self.position))
-        r.best, r.since_best = (gap, 0) if gap < r.best - 0.05 else (r.best, r.since_best + 1)
-        if r.planner is None:
-            r.planner = GradientPlanner(None, self.planner_options, _MaxField(self, live))
-        r.planner.field = _MaxField(self, live)  # the side it follows round an obstacle stays
-        direction = r.planner.choose(self.position, target) if r.since_best < STUCK_STEPS else None
+        direction = r.steer(self.position, target, self.planner_options, _MaxField(self, live))
         if direction is None:
             self.failed.append(r.goal)
             self.route = None

@@ -36,6 +36,8 @@ from gmmap.options import PlannerOptions
 # Components combine by a smooth maximum (a p-norm): o is about the largest a_k, so the faint
 # tails of many components do not add up to close a doorway, as a sum or a product would.
 SOFTMAX_POWER = 8  # `_softmax` multiplies it out
+ARRIVED = 0.35  # metres from a route's waypoint that count as there
+STUCK_STEPS = 24  # steps without getting closer to a route's waypoint before it is given up
 FAINT = 1e-3  # a component's term under this is left out where a field is evaluated locally
 
 
@@ -200,6 +202,50 @@ class PlanResult:
     @property
     def length(self) -> float:
         return float(np.linalg.norm(np.diff(self.path, axis=0), axis=1).sum())
+
+
+@dataclass
+class Route:
+    """Waypoints to a goal (an explorer's, chosen at ``chosen_at``), followed with the
+    gradient planner."""
+
+    waypoints: np.ndarray
+    goal: np.ndarray
+    chosen_at: float
+    reached: int = 0
+    best: float = math.inf
+    since_best: int = 0
+    planner: GradientPlanner | None = None
+
+    def next_waypoint(self, position: np.ndarray) -> np.ndarray | None:
+        """Passes the waypoints within ``ARRIVED`` of ``position`` and returns the next one
+        (None: arrived), counting the steps that got no closer to it."""
+        while (
+            self.reached < len(self.waypoints)
+            and np.linalg.norm(self.waypoints[self.reached] - position) < ARRIVED
+        ):
+            self.reached, self.best, self.since_best = self.reached + 1, math.inf, 0
+        if self.reached == len(self.waypoints):
+            return None
+        target = self.waypoints[self.reached]
+        gap = float(np.linalg.norm(target - position))
+        self.best, self.since_best = (
+            (gap, 0) if gap < self.best - 0.05 else (self.best, self.since_best + 1)
+        )
+        return target
+
+    def steer(
+        self, position: np.ndarray, target: np.ndarray, options: PlannerOptions, field: object
+    ) -> np.ndarray | None:
+        """The planner's unit direction towards ``target`` on ``field`` (one planner per route:
+        the side it follows round an obstacle stays); None when every direction is refused or
+        the robot has got no closer for ``STUCK_STEPS``."""
+        if self.since_best >= STUCK_STEPS:
+            return None
+        if self.planner is None:
+            self.planner = GradientPlanner(None, options, field)
+        self.planner.field = field
+        return self.planner.choose(position, target)
 
 
 class GradientPlanner:

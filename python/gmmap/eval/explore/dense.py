@@ -23,9 +23,9 @@ from scipy.sparse.csgraph import dijkstra
 
 from gmmap import _core
 from gmmap.config import Config
-from gmmap.mapping.explore import ARRIVED, STUCK_STEPS, Claim
+from gmmap.mapping.explore import Claim, Route
 from gmmap.mapping.frame import Frame
-from gmmap.mapping.planner import GradientPlanner, OccupancyField
+from gmmap.mapping.planner import OccupancyField
 from gmmap.math.gmm import Gmm
 
 CELL = 0.05
@@ -96,11 +96,9 @@ class DenseExplorer:
         self.position = map_to_world[:2, 3].copy()  # world frame
         self.claims: dict[str, Claim] = {}
         self.failed: list[np.ndarray] = []
-        self.path: np.ndarray | None = None
-        self.goal: np.ndarray | None = None
+        self.route: Route | None = None
         self.status = "exploring"
-        self._chosen_at, self._reached, self._best, self._since = -math.inf, 0, math.inf, 0
-        self._planner: GradientPlanner | None = None
+        self._chosen_at = -math.inf
 
     # ---- the interface the team loop drives (as `gmmap.mapping.explore.Explorer`) ----------
 
@@ -141,7 +139,8 @@ class DenseExplorer:
         self.claims[robot] = claim
 
     def claim(self) -> Claim:
-        return Claim(self.position.copy(), None if self.goal is None else self.goal.copy())
+        goal = None if self.route is None else self.route.goal.copy()
+        return Claim(self.position.copy(), goal)
 
     # ---- goals and motion -------------------------------------------------------------------
 
@@ -149,40 +148,23 @@ class DenseExplorer:
         """The unit direction in this robot's map frame, or None (see ``status``)."""
         o = self.config.explore
         if (
-            self.path is None
+            self.route is None
             and self.status != "exploring"
             and stamp - self._chosen_at < o.replan_s
         ):
             return None
-        if self.path is None or stamp - self._chosen_at >= o.replan_s:
+        if self.route is None or stamp - self._chosen_at >= o.replan_s:
             self._chosen_at = stamp
             self._choose()
-        if self.path is None:
+        if self.route is None:
             return None
-        while (
-            self._reached < len(self.path)
-            and np.linalg.norm(self.path[self._reached] - self.position) < ARRIVED
-        ):
-            self._reached, self._best, self._since = self._reached + 1, math.inf, 0
-        if self._reached == len(self.path):
-            self.failed.append(self.goal)
-            self.path = self.goal = None
-            return None
-        target = self.path[self._reached]
-        dist = float(np.linalg.norm(target - self.position))
-        self._best, self._since = (
-            (dist, 0) if dist < self._best - 0.05 else (self._best, self._since + 1)
-        )
+        target = self.route.next_waypoint(self.position)
         direction = None
-        if self._since < STUCK_STEPS:
-            field = self._field()
-            if self._planner is None:  # one per path: the side it follows round a corner stays
-                self._planner = GradientPlanner(None, self.config.planner, field)
-            self._planner.field = field
-            direction = self._planner.choose(self.position, target)
-        if direction is None:
-            self.failed.append(self.goal)
-            self.path = self.goal = None
+        if target is not None:
+            direction = self.route.steer(self.position, target, self.config.planner, self._field())
+        if direction is None:  # arrived (the frontier is seen) or cannot get there
+            self.failed.append(self.route.goal)
+            self.route = None
             return None
         return self.map_to_world[:2, :2].T @ direction
 
@@ -219,7 +201,7 @@ class DenseExplorer:
         frontier = passable & beside
         labels, n = ndimage.label(frontier, np.ones((3, 3), bool))
         if n == 0:
-            self.path = self.goal = None
+            self.route = None
             self.status = "done: no frontier left that it can reach"
             return
         dist, pred = _grid_dijkstra(passable, start)
@@ -245,14 +227,14 @@ class DenseExplorer:
             if cost < best_cost:
                 best, best_cost, best_cell = goal, cost, pick
         if best is None:
-            self.path = self.goal = None
+            self.route = None
             self.status = "stopped: no frontier reachable on the grid"
             return
         cells = _walk_back(pred, best_cell, sub.shape, start)
         pts = g.centre_of(cells[::10] + lo)  # every 50 cm
-        self.path = np.vstack([pts[1:], best[None]]) if len(pts) > 1 else best[None]
-        self.goal, self.status = best, "exploring"
-        self._reached, self._best, self._since, self._planner = 0, math.inf, 0, None
+        path = np.vstack([pts[1:], best[None]]) if len(pts) > 1 else best[None]
+        self.route = Route(path, best, self._chosen_at)
+        self.status = "exploring"
 
     def _crowding(self, goal: np.ndarray) -> float:
         cost, mine = 0.0, float(np.linalg.norm(goal - self.position))
