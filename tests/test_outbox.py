@@ -187,3 +187,16 @@ def test_a_budget_takes_its_new_rate_at_once():
     assert time.monotonic() - start >= 0.15
     budget.set_rate(None)
     assert budget.take(10**9)
+
+
+def test_a_budget_that_follows_a_changing_rate_still_sends_a_message_above_its_burst():
+    rates = iter([10.0, 2_000.0, 20.0] * 1000)
+    budget = Budget(10.0)
+    budget.take(10)  # the burst is spent
+    budget.follow(lambda: next(rates))  # a rate that changes at every look
+    start = time.monotonic()
+    # 300 B: 30 bursts at the lowest rate; saved toward the message however the rate moves.
+    assert budget.take(300, lambda: time.monotonic() - start > 5.0)
+    budget.follow(None)
+    budget.set_rate(None)
+    assert budget.take(10**9)

@@ -27,19 +27,22 @@ class TransportOptions:
     secured fleet) or ``udp``, datagrams: no ACKs, handshakes or retransmission stalls, for
     links that come and go (what a datagram lost, fetches recover; no TLS over it). Multicast
     scouting is off by default so that fleets on one network only meet through ``connect``
-    endpoints (Zenoh's gossip still lets peers of peers find each other). ``zenoh_options``
-    are raw Zenoh configuration entries (``{"transport/link/tx/lease": 5000}``) applied last.
+    endpoints (Zenoh's gossip still lets peers of peers find each other, but on a shared
+    channel). ``zenoh_options`` are raw Zenoh configuration entries
+    (``{"transport/link/tx/lease": 5000}``) applied last.
 
     ``broadcast``: on one radio channel shared by the fleet, a UDP multicast group
     (``udp/224.0.0.224:7447``, ``#iface=<name>`` to pick the interface, else the route to the
     group picks it; a loopback needs ``ip link set lo multicast on``): submaps and adverts go on
     the air once for every robot in range (`gmmap.fleet.net.air`); presence, fetches and their
-    answers stay on the unicast links, which repair what a robot missed. Not in a secured
-    fleet: the group has no TLS. ``channel_rate``: the shared channel's bytes/s, all robots
-    together; each robot then sends (submaps, adverts and fetch answers) within an equal share
-    of it, over the robots present (`gmmap.fleet.net.outbox.air_share`), and within
-    ``robot.budget`` where that is lower. Without it, datagrams on a saturated channel are
-    dropped (broadcast has no congestion control) and the robots' TCP links stall behind them.
+    answers stay on the unicast links, which repair what a robot missed. Zenoh's gossip is off
+    there: each robot lists the peers it dials in ``connect``. Not in a secured fleet: the
+    group has no TLS. ``channel_rate``: the shared channel's bytes/s, all robots together; each
+    robot then sends (submaps, adverts and fetch answers) within an equal share of it over
+    the robots present and, with ``broadcast``, those heard on the air lately
+    (`gmmap.fleet.net.outbox.air_share`), and within ``robot.budget`` where that is lower.
+    Without it, datagrams on a saturated channel are dropped (broadcast has no congestion
+    control) and the robots' TCP links stall behind them.
     """
 
     #: Zenoh listen endpoints; null: one loopback endpoint on port

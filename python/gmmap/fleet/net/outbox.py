@@ -62,34 +62,52 @@ Publish = Callable[[str, int, bytes, "frozenset[str] | None"], None]
 
 
 class Budget:
-    """A token bucket of ``rate`` bytes/s (None: unlimited), thread-safe."""
+    """A token bucket of ``rate`` bytes/s (None: unlimited), thread-safe; `follow` makes the
+    rate a function of time."""
 
     def __init__(self, rate: float | None) -> None:
         self.rate = rate
         self._lock = threading.Lock()
         self._tokens = rate * BURST_S if rate else 0.0
         self._at = time.monotonic()
+        self._source: Callable[[], float | None] | None = None
 
     def set_rate(self, rate: float | None) -> None:
         """From now on ``rate`` bytes/s; the tokens saved stay, within the new burst (a
         bucket that had no limit starts full, as a new one does)."""
         with self._lock:
-            now = time.monotonic()
-            saved = math.inf if self.rate is None else self._tokens + (now - self._at) * self.rate
-            self._at, self.rate = now, rate
-            self._tokens = min(saved, rate * BURST_S) if rate else 0.0
+            self._switch(rate, 0)
+
+    def follow(self, source: Callable[[], float | None] | None) -> None:
+        """Take the rate from ``source()`` while waiting to send, from now on (None: stop)."""
+        with self._lock:
+            self._source = source
+
+    def _switch(self, rate: float | None, n: int) -> None:
+        """The tokens saved up to now at the old rate, then ``rate``; a message of ``n`` bytes
+        keeps what it saved toward itself. Called locked."""
+        saved = math.inf if self.rate is None else self._accrued(n)
+        self._at, self.rate = time.monotonic(), rate
+        self._tokens = min(saved, max(rate * BURST_S, n)) if rate else 0.0
+
+    def _accrued(self, n: int) -> float:
+        """The tokens now, within the burst or ``n``, whichever is more. Called locked."""
+        assert self.rate is not None
+        now = time.monotonic()
+        cap = max(self.rate * BURST_S, float(n))
+        self._tokens = min(cap, self._tokens + (now - self._at) * self.rate)
+        self._at = now
+        return self._tokens
 
     def take(self, n: int, stopped: Callable[[], bool] = lambda: False) -> bool:
         """Wait until ``n`` bytes may go and take them; False if ``stopped()`` first."""
-        if self.rate is None:
-            return True
-        cap = max(self.rate * BURST_S, float(n))
         while not stopped():
             with self._lock:
-                now = time.monotonic()
-                self._tokens = min(cap, self._tokens + (now - self._at) * self.rate)
-                self._at = now
-                if self._tokens >= n:
+                if self._source is not None and (rate := self._source()) != self.rate:
+                    self._switch(rate, n)
+                if self.rate is None:
+                    return True
+                if self._accrued(n) >= n:
                     self._tokens -= n
                     return True
                 wait = (n - self._tokens) / self.rate

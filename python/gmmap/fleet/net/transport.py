@@ -151,6 +151,7 @@ class Transport(Querying):
         )
         # On a shared channel messages go on the air once (`TransportOptions.broadcast`).
         self._air: Air | None = None
+        self._talkers: dict[str, float] = {}  # robot → when it was last heard on the air
         if config.options.broadcast is not None:
             try:
                 self._air = Air(config.options.broadcast, self._on_air)
@@ -276,8 +277,18 @@ class Transport(Querying):
         own = parsed is not None and parsed[:2] == (self.fleet, self.robot)
         # Taken once someone subscribes, as a put is.
         hearing = self._data_subscriber is not None
+        if parsed is not None and parsed[0] == self.fleet and not own:
+            with self._lock:
+                self._talkers[parsed[1]] = time.monotonic()
         if hearing and not self._closed and not own:
             self._take(key, parsed, payload)
+
+    def talkers(self, window_s: float) -> set[str]:
+        """The other robots of the fleet heard on the air (`TransportOptions.broadcast`) in the
+        last ``window_s`` s."""
+        since = time.monotonic() - window_s
+        with self._lock:
+            return {robot for robot, at in self._talkers.items() if at >= since}
 
     def _take(
         self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes | bytes

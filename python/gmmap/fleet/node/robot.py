@@ -85,6 +85,7 @@ STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held b
 # On a shared channel a peer counts as quiet after the air time of this many submaps of this
 # size at its share of the channel.
 QUIET_MESSAGES, SUBMAP_BYTES = 3, 1_000
+HEARD_MIN_S = 10.0  # the shortest window over which a robot measures what others broadcast
 
 
 class RobotNode:
@@ -329,9 +330,23 @@ class RobotNode:
         self.lingerer.joined(peer)
 
     def _share_air(self, _peer: str | None = None) -> None:
+        options, budget = self.config.transport, self.config.robot.budget
         robots = 1 + len(self.transport.peers())
-        rate = air_share(self.config.transport.channel_rate, robots, self.config.robot.budget)
-        self.budget.set_rate(rate)
+        rate = air_share(options.channel_rate, robots, budget)
+        if rate and options.broadcast is not None:
+            # Shared with the robots present and those heard on the air lately (over two
+            # submaps' air time at an equal share), a session with them open or not. Hearing
+            # lags by the channel's queue: a share over the talkers alone, larger while the
+            # others' first messages queued, lost 12 of 248 submaps (5 robots, 500 B/s).
+            window = max(HEARD_MIN_S, 2 * SUBMAP_BYTES / rate)
+            t = self.transport
+            self.budget.follow(
+                lambda: air_share(
+                    options.channel_rate, 1 + len({*t.peers(), *t.talkers(window)}), budget
+                )
+            )
+        else:
+            self.budget.set_rate(rate)
         if rate and self.arrivals.shared_channel:
             # Paced to its share, a robot is quiet between messages as long as one takes.
             quiet = max(quiet_for(self.config.robot), QUIET_MESSAGES * SUBMAP_BYTES / rate)
