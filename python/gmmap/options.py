@@ -393,7 +393,8 @@ class ExploreOptions:
     link_radius: float = (
         2.5  #: Viewpoints this close join the route graph if the line between is known free
     )
-    min_frontier: int = 3  #: Frontier points a cluster needs to become a goal
+    #: Frontier points a cluster needs to become a goal while a larger one is left
+    min_frontier: int = 3
     claim_radius: float = 2.0  #: A frontier this close to a peer's goal is left to the peer
     replan_s: float = 4.0  #: Seconds of travel between two goal choices
     turn_rate: float = 0.8  #: Turning rate (rad/s) of the simulated robots
