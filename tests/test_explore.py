@@ -146,6 +146,15 @@ def test_a_robot_in_a_corridor_reaches_one_end_and_turns_back_to_the_other(tmp_p
     assert r.coverage > 0.9 and r.area > 0.9
 
 
+def test_the_far_end_of_a_corridor_seen_lengthwise_is_still_a_goal(tmp_path):
+    """A 10 m LiDAR down a 24 x 1.6 m corridor sees its far part across a few directions only:
+    a frontier of one or two points, which must still be visited once nothing larger is left."""
+    long = closed("long", 24.0, 1.6, [], (1.0, 0.8, 0.0))
+    r = run_explore(config(saved(long, tmp_path), 1, reach=10.0))
+    assert np.array(r.paths[0])[:, 0].max() > 12.0, "it stopped where it started"
+    assert r.coverage > 0.9 and r.collisions == 0
+
+
 def test_two_robots_in_two_rooms_end_in_different_rooms(tmp_path):
     r = run_explore(config(saved(two_rooms(), tmp_path), 2))
     assert r.collisions == 0
