@@ -27,8 +27,8 @@ class TransportOptions:
     secured fleet) or ``udp``, datagrams: no ACKs, handshakes or retransmission stalls, for
     links that come and go (what a datagram lost, fetches recover; no TLS over it). Multicast
     scouting is off by default so that fleets on one network only meet through ``connect``
-    endpoints (Zenoh's gossip still lets peers of peers find each other, but on a shared
-    channel). ``zenoh_options`` are raw Zenoh configuration entries
+    endpoints (Zenoh's gossip still lets peers of peers find each other, except on a shared
+    channel: see ``broadcast``). ``zenoh_options`` are raw Zenoh configuration entries
     (``{"transport/link/tx/lease": 5000}``) applied last.
 
     ``broadcast``: on one radio channel shared by the fleet, a UDP multicast group

@@ -288,7 +288,9 @@ class Transport(Querying):
         last ``window_s`` s."""
         since = time.monotonic() - window_s
         with self._lock:
-            return {robot for robot, at in self._talkers.items() if at >= since}
+            # Forgotten once out of the window: names forged on the air do not pile up.
+            self._talkers = {r: at for r, at in self._talkers.items() if at >= since}
+            return set(self._talkers)
 
     def _take(
         self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes | bytes

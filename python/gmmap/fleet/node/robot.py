@@ -85,7 +85,7 @@ STOP_FLUSH_S = 2.0  # a stopped robot's last chance to send the bundle it held b
 # On a shared channel a peer counts as quiet after the air time of this many submaps of this
 # size at its share of the channel.
 QUIET_MESSAGES, SUBMAP_BYTES = 3, 1_000
-HEARD_MIN_S = 10.0  # the shortest window over which a robot measures what others broadcast
+HEARD_MIN_S = 10.0  # a robot heard on the air counts for at least this long (s)
 
 
 class RobotNode:
