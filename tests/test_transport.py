@@ -10,6 +10,7 @@ import zenoh
 from gmmap.fleet.net.keys import (
     FetchRequest,
     fetch_key,
+    listen_port,
     parse_fetch,
     parse_reply_key,
     parse_seq_ranges,
@@ -23,7 +24,6 @@ from gmmap.fleet.net.transport import (
     TransportOptions,
     alive_key,
     data_key,
-    free_port,
     parse_data_key,
 )
 from gmmap.fleet.storage.store import Store
@@ -68,7 +68,7 @@ class Inbox:
 @pytest.fixture
 def pair() -> Iterator[tuple[Transport, Transport]]:
     """Robots a and b of fleet "lab" on loopback; b connects to a."""
-    port_a = free_port()
+    port_a = listen_port()
     with (
         Transport(tconfig("lab", "a", port=port_a)) as a,
         Transport(tconfig("lab", "b", connect=[endpoint(port_a)])) as b,
@@ -159,7 +159,7 @@ def test_bad_zenoh_option_raises_config_error():
 
 
 def test_port_in_use_raises_transport_error():
-    port = free_port()
+    port = listen_port()
     with (
         Transport(tconfig("lab", "a", port=port)),
         pytest.raises(TransportError, match="cannot open"),
@@ -199,7 +199,7 @@ def test_exchange_submaps_and_count_bytes(pair):
 
 
 def test_liveliness_join_and_leave():
-    port_a = free_port()
+    port_a = listen_port()
     joined, left = queue.Queue(), queue.Queue()
     with Transport(tconfig("lab", "a", port=port_a)) as a:
         a.on_join(joined.put)
@@ -271,7 +271,7 @@ def test_callback_errors_do_not_stop_delivery(pair):
 
 def test_fetch_what_was_missed(tmp_path: Path):
     """b starts after a published: it fetches a's submaps from a's store."""
-    port_a = free_port()
+    port_a = listen_port()
     with (
         Store(tmp_path / "a.db") as store,
         Transport(tconfig("lab", "a", port=port_a)) as a,
@@ -310,7 +310,7 @@ def test_fetch_what_was_missed(tmp_path: Path):
 def test_a_fetch_reaches_only_the_robots_it_names(tmp_path: Path):
     """From the owner, its owner alone answers; through one robot in between, that one; for a
     robot out of reach with none named, every holder."""
-    port_a, port_c = free_port(), free_port()
+    port_a, port_c = listen_port(), listen_port()
     with (
         Store(tmp_path / "a.db") as store_a,
         Store(tmp_path / "c.db") as store_c,
@@ -341,7 +341,7 @@ def test_a_fetch_reaches_only_the_robots_it_names(tmp_path: Path):
 def test_a_message_told_to_one_peer_reaches_that_peer_alone():
     """b tells a alone: a's callbacks get it as a put, c hears nothing; a message told in
     a's own name, or with a malformed key, is ignored."""
-    port_a, port_c = free_port(), free_port()
+    port_a, port_c = listen_port(), listen_port()
     got: dict[str, list] = {"a": [], "c": []}
     with (
         Transport(tconfig("lab", "a", port=port_a)) as a,
@@ -383,7 +383,7 @@ def test_fetch_answers_keep_to_the_budget(tmp_path: Path):
     after the first."""
     from gmmap.fleet.net.outbox import Budget
 
-    port_a = free_port()
+    port_a = listen_port()
     with (
         Store(tmp_path / "a.db") as store,
         Transport(tconfig("lab", "a", port=port_a)) as a,
@@ -401,7 +401,7 @@ def test_fetch_answers_keep_to_the_budget(tmp_path: Path):
 
 
 def test_fetch_unknown_names_the_robots_a_newcomer_never_met(tmp_path: Path):
-    port_a = free_port()
+    port_a = listen_port()
     with (
         Store(tmp_path / "a.db") as store,
         Transport(tconfig("lab", "a", port=port_a)) as a,
