@@ -97,7 +97,8 @@ DESCRIPTIONS: dict[str, str] = {
     "and how it grows with the map's component count. Baseline: one full A* plan on a 5 cm "
     "grid of the same scans (`astar_over_gmm`: how many GMM steps one A* plan costs).",
     "explore": "Simulated robots exploring procedural offices never used while the explorer "
-    "was written (`gmmap explore`, 16-beam LiDAR, 3 robots, 300 simulated seconds at most): "
+    "was written (`gmmap explore`, 16-beam LiDAR on two worlds and the depth camera on one, "
+    "3 robots, 300 simulated seconds at most): "
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
     "without sharing, and frontier exploration on a 5 cm grid from shared point clouds (given "
@@ -310,7 +311,7 @@ SCOREBOARD: tuple[Row, ...] = (
                 "dense bytes / GMM bytes",
                 ("cases", "world=random-office:101", "bytes_dense_over_gmm"),
             ),
-            ("collisions", ("collisions",)),
+            ("collisions in every run, LiDAR and depth", ("collisions",)),
         ),
     ),
     _sensors(("lidar16_3_robots",), "office, 16-beam LiDAR, 3 robots × seeds"),
