@@ -298,13 +298,15 @@ class Explorer:
         if not fronts:
             self.route, self.status = None, "done: no frontier left that it can reach"
             return
-        claimed = self._claimed_goals()
+        peers = self._joined_peers()
+        claimed = [g for _, g in peers if g is not None]
         mine = None if self.route is None else self.route.goal
+        keep_mine = mine is not None and self._nearest(mine, peers)
         free = [
             f
             for f in fronts
             if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
-            or (mine is not None and np.linalg.norm(f.goal - mine) < 1.0 and self._nearest(mine))
+            or (keep_mine and np.linalg.norm(f.goal - mine) < 1.0)
         ]
         fronts = free or fronts
         dist, pred, start = self._distances(space, k, live)
@@ -312,7 +314,7 @@ class Explorer:
         for f in fronts:
             h = f.horizon
             cost = dist[h] + float(np.linalg.norm(f.goal - space.origins[h]))
-            costs.append(cost + self._crowding(f.goal))
+            costs.append(cost + self._crowding(f.goal, peers))
         best = int(np.argmin(costs))
         if not math.isfinite(costs[best]):
             self.route = None
@@ -368,39 +370,28 @@ class Explorer:
         dist, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
         return dist, pred, start
 
-    def _claimed_goals(self) -> list[np.ndarray]:
+    def _joined_peers(self) -> list[tuple[np.ndarray, np.ndarray | None]]:
+        """Each joined peer's last claim in this robot's frame: (position, goal or None)."""
         out = []
         for robot, claim in self.claims.items():
             T = self._peer_frame(robot)
-            if T is not None and claim.goal is not None:
-                out.append(T[:2, :2] @ claim.goal + T[:2, 3])
+            if T is not None:
+                R, t = T[:2, :2], T[:2, 3]
+                goal = None if claim.goal is None else R @ claim.goal + t
+                out.append((R @ claim.position + t, goal))
         return out
 
-    def _nearest(self, goal: np.ndarray) -> bool:
+    def _nearest(self, goal: np.ndarray, peers: list) -> bool:
         """Whether no joined peer is nearer ``goal`` than this robot: then a goal it already
         heads for stays its own, whoever claimed it since (two robots do not swap back and
         forth)."""
         mine = float(np.linalg.norm(goal - self.position))
-        for robot, claim in self.claims.items():
-            T = self._peer_frame(robot)
-            if (
-                T is not None
-                and np.linalg.norm(goal - (T[:2, :2] @ claim.position + T[:2, 3])) < mine
-            ):
-                return False
-        return True
+        return all(np.linalg.norm(goal - position) >= mine for position, _ in peers)
 
-    def _crowding(self, goal: np.ndarray) -> float:
+    def _crowding(self, goal: np.ndarray, peers: list) -> float:
         """A cost for goals nearer a joined peer than this robot: robots spread out."""
-        cost = 0.0
         mine = float(np.linalg.norm(goal - self.position))
-        for robot, claim in self.claims.items():
-            T = self._peer_frame(robot)
-            if T is None:
-                continue
-            theirs = float(np.linalg.norm(goal - (T[:2, :2] @ claim.position + T[:2, 3])))
-            cost += max(0.0, mine - theirs)
-        return cost
+        return sum(max(0.0, mine - float(np.linalg.norm(goal - p))) for p, _ in peers)
 
     def _failed_near(self, goal: np.ndarray) -> bool:
         return any(np.linalg.norm(goal - g) < 0.75 for g in self.failed)
