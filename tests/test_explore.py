@@ -17,6 +17,7 @@ from gmmap.eval.explore.coverage import Coverage
 from gmmap.eval.explore.team import run_explore
 from gmmap.io.sim import World
 from gmmap.io.sim.world import slab, wall
+from gmmap.mapping.explore import Explorer
 from gmmap.mapping.frontier import (
     FreeSpace,
     Horizon,
@@ -24,6 +25,7 @@ from gmmap.mapping.frontier import (
     encode_horizons,
     horizon_from,
 )
+from gmmap.mapping.planner import OccupancyField
 from gmmap.math.gmm import Gmm
 from gmmap.options import ExploreOptions
 
@@ -101,6 +103,18 @@ def test_free_space_is_inside_some_horizon_and_frontiers_lie_beside_it():
     assert space.frontiers(lambda xy: ~space.contains(xy, shrink=0.2)) == []
 
 
+def test_a_frontier_is_open_only_where_unknown_space_lies_behind_it():
+    """A gap between two seen discs hides nothing; the rim facing the unseen does."""
+    full = np.full(72, 1.0)
+    space = FreeSpace([Horizon(np.zeros(2), full), Horizon(np.array([2.6, 0.0]), full)])
+    wall_north = lambda xy: np.asarray(xy)[:, 1] > 1.6  # noqa: E731
+    probes = np.array([[1.3, 0.0], [-1.3, 0.0], [0.0, 1.3], [0.0, -1.3]])
+    targets = 0.7 * probes
+    assert space._open(probes, targets, wall_north).tolist() == [False, True, False, True]
+    fronts = space.frontiers(wall_north)
+    assert sum(f.open for f in fronts) < sum(f.size for f in fronts)
+
+
 def test_explore_options_are_checked():
     with pytest.raises(InvalidInputError):
         ExploreOptions(bins=4)
@@ -151,8 +165,30 @@ def test_the_far_end_of_a_corridor_seen_lengthwise_is_still_a_goal(tmp_path):
     a frontier of one or two points, which must still be visited once nothing larger is left."""
     long = closed("long", 24.0, 1.6, [], (1.0, 0.8, 0.0))
     r = run_explore(config(saved(long, tmp_path), 1, reach=10.0))
-    assert np.array(r.paths[0])[:, 0].max() > 12.0, "it stopped where it started"
+    x = np.array(r.paths[0])[:, 0]
+    assert x.max() > 12.0, "it stopped where it started"
     assert r.coverage > 0.9 and r.collisions == 0
+
+
+def test_a_robot_heads_straight_for_a_frontier_it_has_a_free_line_to():
+    """The far end of a corridor seen from a viewpoint the robot has since left behind it: the
+    route goes on, not back to that viewpoint first."""
+    angle = (np.arange(72) + 0.5) * 2 * np.pi / 72
+    reach = np.minimum(8.0, 0.7 / np.maximum(np.abs(np.sin(angle)), 1e-9))
+    reach[np.cos(angle) < 0] = np.minimum(reach[np.cos(angle) < 0], 0.8)  # a wall behind
+    explorer = Explorer("robot_0", config("corridor", 1))
+    explorer.recorder.closed = [Horizon(np.zeros(2), reach)]
+    explorer.position = np.array([4.0, 0.0])
+    along = np.arange(-0.9, 12.0, 0.1)
+    across = np.arange(-0.8, 0.81, 0.1)
+    walls = np.vstack([np.c_[along, np.full_like(along, y)] for y in (-0.8, 0.8)])
+    walls = np.vstack([walls, np.c_[np.full_like(across, -0.9), across]])
+    pts = np.c_[walls, np.full(len(walls), 0.5)]
+    seen = Gmm(np.full(len(pts), 1 / len(pts)), pts, np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1)))
+    explorer._choose(0.0, OccupancyField(seen, explorer.planner_options))
+    route = explorer.route
+    assert route is not None and route.goal[0] > 7.0
+    assert len(route.waypoints) == 1, f"goes back through {route.waypoints[:-1]}"
 
 
 def test_two_robots_in_two_rooms_end_in_different_rooms(tmp_path):

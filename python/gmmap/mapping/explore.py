@@ -11,10 +11,12 @@ surface (the GMM occupancy field), those a joined peer heads for (its goal withi
 route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
 between them) and viewpoints within ``link_radius`` whose straight line is known free; a
 frontier's cost is the route to the viewpoint that saw it plus the straight, observed line to
-its target. Moving: the GMM gradient planner steers towards the next waypoint on the team's
-field, zero where the robot's footprint is known free (EM spans a doorway with the wall's
-components; the horizons saw through it), and on a field of what the sensor saw since the
-last-but-one submap (a robot avoids what it has just seen, shared or not).
+its target, or the straight line from the robot where that is known free. Frontiers with
+unknown space behind them come first, then large ones, then any. Moving: the GMM gradient
+planner steers towards the next waypoint on the team's field, zero where the robot's footprint
+is known free (EM spans a doorway with the wall's components; the horizons saw through it),
+and on a field of what the sensor saw since the last-but-one submap (a robot avoids what it
+has just seen, shared or not).
 """
 
 from __future__ import annotations
@@ -294,7 +296,12 @@ class Explorer:
         fronts = [f for f in fronts if not self._failed_near(f.goal)]
         # Small frontiers only once no large one is left: the far end of a corridor seen
         # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
-        fronts = [f for f in fronts if f.size >= o.min_frontier] or fronts
+        # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
+        fronts = (
+            [f for f in fronts if f.open >= o.min_frontier]
+            or [f for f in fronts if f.size >= o.min_frontier]
+            or fronts
+        )
         if not fronts:
             self.route, self.status = None, "done: no frontier left that it can reach"
             return
@@ -310,11 +317,15 @@ class Explorer:
         ]
         fronts = free or fronts
         dist, pred, start = self._distances(space, k, live)
-        costs = []
-        for f in fronts:
-            h = f.horizon
-            cost = dist[h] + float(np.linalg.norm(f.goal - space.origins[h]))
-            costs.append(cost + self._crowding(f.goal, peers))
+        goals, seen_from = np.array([f.goal for f in fronts]), [f.horizon for f in fronts]
+        via = dist[seen_from] + np.linalg.norm(goals - space.origins[seen_from], axis=1)
+        # Straight there where the line is known free: a corridor's far end was seen from a
+        # viewpoint behind the robot, and the route through it would go back first.
+        straight = np.linalg.norm(goals - self.position, axis=1)
+        direct = self._clear_lines(space, np.repeat(self.position[None], len(goals), 0), goals)
+        direct &= straight < via
+        route_cost = np.where(direct, straight, via)
+        costs = [c + self._crowding(f.goal, peers) for c, f in zip(route_cost, fronts, strict=True)]
         best = int(np.argmin(costs))
         if not math.isfinite(costs[best]):
             self.route = None
@@ -325,7 +336,7 @@ class Explorer:
             self.route.chosen_at = stamp  # keep going: switching goals back and forth wastes more
             return
         f = fronts[best]
-        chain, node = [], f.horizon
+        chain, node = [], (start if direct[best] else f.horizon)
         while node != start and node >= 0:
             chain.append(space.origins[node])
             node = pred[node]

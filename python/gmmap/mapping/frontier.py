@@ -37,6 +37,7 @@ from gmmap.mapping.frame import Frame
 RANGE_STEP = 0.1  # metres per range unit on the wire
 BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
 MAX_CODE = 255
+BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
 
@@ -164,12 +165,14 @@ class HorizonRecorder:
 @dataclass
 class Frontier:
     """A cluster of frontier points: ``goal`` (a target inside known free space), the horizon
-    whose viewpoint sees it in a straight line, and ``size`` (points: a proxy for the unknown
-    area it opens)."""
+    whose viewpoint sees it in a straight line, ``size`` (points: a proxy for the unknown
+    area it opens) and ``open`` (those of its points with unknown space behind them, see
+    `FreeSpace.frontiers`)."""
 
     goal: np.ndarray
     horizon: int
     size: int
+    open: int = 0
 
 
 class FreeSpace:
@@ -209,7 +212,9 @@ class FreeSpace:
     ) -> list[Frontier]:
         """Frontier clusters: points just outside every horizon and not ``blocked``, each with
         a target ``back`` m inside the horizon it was found from; points closer than ``link``
-        belong to one cluster."""
+        belong to one cluster. A point is *open* when the space ``BEHIND`` m past it, away from
+        its target, is neither known free nor blocked: unknown space lies there, not a sliver
+        between two horizons against a mapped wall."""
         probes, targets, owner = self._probes(spacing, back)
         if not len(probes):
             return []
@@ -237,13 +242,23 @@ class FreeSpace:
         pairs = cKDTree(probes).query_pairs(link, output_type="ndarray")
         graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(probes),) * 2)
         _, label = connected_components(graph, directed=False)
+        is_open = self._open(probes, targets, blocked)
         out = []
         for c in np.unique(label):
             idx = np.flatnonzero(label == c)
             centre = probes[idx].mean(axis=0)
             pick = idx[np.argmin(np.linalg.norm(probes[idx] - centre, axis=1))]
-            out.append(Frontier(targets[pick], int(owner[pick]), len(idx)))
+            out.append(Frontier(targets[pick], int(owner[pick]), len(idx), int(is_open[idx].sum())))
         return out
+
+    def _open(self, probes: np.ndarray, targets: np.ndarray, blocked: Blocked) -> np.ndarray:
+        """Whether each probe has unknown space behind it (`frontiers`)."""
+        away = _unit_rows(probes - targets)
+        is_open = np.ones(len(probes), dtype=bool)
+        for d in BEHIND:
+            ahead = probes + d * away
+            is_open &= ~self.contains(ahead, shrink=-0.05) & ~blocked(ahead)
+        return is_open
 
     def _probes(self, spacing: float, back: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Candidate frontier points with their targets and horizons: past the end of every
@@ -280,3 +295,7 @@ class FreeSpace:
             targets.append(self.origins[hh] + dist[:, None] * side(bb + shift * 0.3 * width))
             owner.append(hh)
         return np.vstack(probes), np.vstack(targets), np.concatenate(owner)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-9)
