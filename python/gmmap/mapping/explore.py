@@ -10,8 +10,9 @@ surface (the GMM occupancy field), those a joined peer heads for (its goal withi
 ``claim_radius``, unless this robot heads there already and is nearer) and those given up. A
 route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
 between them) and viewpoints within ``link_radius`` whose straight line is known free; a
-frontier's cost is the route to the viewpoint that saw it plus the straight, observed line to
-its target, or the straight line from the robot where that is known free. Frontiers with
+frontier's cost is the route to the cheapest viewpoint whose horizon holds its target plus
+the straight, observed line from there, or the straight line from the robot where that is
+known free. Frontiers with
 unknown space behind them come first, then large ones, then any. Moving: the GMM gradient
 planner steers towards the next waypoint on the team's field, zero where the robot's footprint
 is known free (EM spans a doorway with the wall's components; the horizons saw through it),
@@ -31,7 +32,7 @@ from scipy.spatial import cKDTree
 
 from gmmap.config import Config
 from gmmap.mapping.frame import Frame
-from gmmap.mapping.frontier import FreeSpace, Horizon, HorizonRecorder, encode_horizons
+from gmmap.mapping.frontier import BACK, FreeSpace, Horizon, HorizonRecorder, encode_horizons
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.planner import ARRIVED, OccupancyField, Route
 from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
@@ -317,8 +318,16 @@ class Explorer:
         ]
         fronts = free or fronts
         dist, pred, start = self._distances(space, k, live)
-        goals, seen_from = np.array([f.goal for f in fronts]), [f.horizon for f in fronts]
-        via = dist[seen_from] + np.linalg.norm(goals - space.origins[seen_from], axis=1)
+        # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
+        # found it: that one may lie far back, round a corner the robot has since turned.
+        goals = np.array([f.goal for f in fronts])
+        legs = np.linalg.norm(goals[:, None] - space.origins[None], axis=2)
+        legs[~space.seen_by(goals, shrink=BACK)] = np.inf
+        legs[np.arange(len(fronts)), [f.horizon for f in fronts]] = np.linalg.norm(
+            goals - space.origins[[f.horizon for f in fronts]], axis=1
+        )
+        through = np.argmin(dist[None, : len(space)] + legs, axis=1)
+        via = dist[through] + legs[np.arange(len(fronts)), through]
         # Straight there where the line is known free: a corridor's far end was seen from a
         # viewpoint behind the robot, and the route through it would go back first.
         straight = np.linalg.norm(goals - self.position, axis=1)
@@ -336,7 +345,7 @@ class Explorer:
             self.route.chosen_at = stamp  # keep going: switching goals back and forth wastes more
             return
         f = fronts[best]
-        chain, node = [], (start if direct[best] else f.horizon)
+        chain, node = [], (start if direct[best] else int(through[best]))
         while node != start and node >= 0:
             chain.append(space.origins[node])
             node = pred[node]

@@ -37,6 +37,7 @@ from gmmap.mapping.frame import Frame
 RANGE_STEP = 0.1  # metres per range unit on the wire
 BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
 MAX_CODE = 255
+BACK = 0.4  # metres a frontier's target lies inside the horizon that sees it
 BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
@@ -198,17 +199,22 @@ class FreeSpace:
         if not len(self) or not len(pts):
             return inside
         for start in range(0, len(pts), 2048):
-            chunk = pts[start : start + 2048]
-            d = chunk[:, None, :] - self.origins[None]
-            r = np.hypot(d[..., 0], d[..., 1])
-            b = self._bin(np.arctan2(d[..., 1], d[..., 0]))
-            lim = self.ranges[np.arange(len(self))[None], b]
-            ok = (r < np.fmax(np.nan_to_num(lim, nan=-1.0), BODY) - shrink) & (r < near)
-            inside[start : start + 2048] = ok.any(axis=1)
+            inside[start : start + 2048] = self.seen_by(
+                pts[start : start + 2048], shrink, near
+            ).any(axis=1)
         return inside
 
+    def seen_by(self, xy: np.ndarray, shrink: float = 0.0, near: float = 30.0) -> np.ndarray:
+        """(N, H): whether each point is inside each horizon by ``shrink`` m, so that the
+        straight line from that horizon's viewpoint to it is known free (star-shaped)."""
+        d = np.atleast_2d(xy)[:, None, :] - self.origins[None]
+        r = np.hypot(d[..., 0], d[..., 1])
+        b = self._bin(np.arctan2(d[..., 1], d[..., 0]))
+        lim = self.ranges[np.arange(len(self))[None], b]
+        return (r < np.fmax(np.nan_to_num(lim, nan=-1.0), BODY) - shrink) & (r < near)
+
     def frontiers(
-        self, blocked: Blocked, spacing: float = 0.25, back: float = 0.4, link: float = 0.75
+        self, blocked: Blocked, spacing: float = 0.25, back: float = BACK, link: float = 0.75
     ) -> list[Frontier]:
         """Frontier clusters: points just outside every horizon and not ``blocked``, each with
         a target ``back`` m inside the horizon it was found from; points closer than ``link``
