@@ -393,7 +393,7 @@ class ExploreOptions:
     link_radius: float = (
         2.5  #: Viewpoints this close join the route graph if the line between is known free
     )
-    #: Open frontier points a cluster needs to come first, then points (while a larger one is left)
+    #: Frontier points (open ones first) a cluster needs to be a goal while a larger one is left
     min_frontier: int = 3
     claim_radius: float = 2.0  #: A frontier this close to a peer's goal is left to the peer
     replan_s: float = 4.0  #: Seconds of travel between two goal choices
