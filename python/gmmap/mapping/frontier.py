@@ -261,9 +261,13 @@ class FreeSpace:
         """Whether each probe has unknown space behind it (`frontiers`)."""
         away = _unit_rows(probes - targets)
         is_open = np.ones(len(probes), dtype=bool)
-        for d in BEHIND:
-            ahead = probes + d * away
-            is_open &= ~self.contains(ahead, shrink=-0.05) & ~blocked(ahead)
+        for d in BEHIND:  # the occupancy field is the costly test: only where still open
+            idx = np.flatnonzero(is_open)
+            ahead = probes[idx] + d * away[idx]
+            free = self.contains(ahead, shrink=-0.05)
+            if not free.all():
+                free[~free] = blocked(ahead[~free])
+            is_open[idx[free]] = False
         return is_open
 
     def _probes(self, spacing: float, back: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
