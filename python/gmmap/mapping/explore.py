@@ -12,12 +12,11 @@ route runs through the graph of viewpoints: consecutive viewpoints of one robot 
 between them) and viewpoints within ``link_radius`` whose straight line is known free; a
 frontier's cost is the route to the cheapest viewpoint whose horizon holds its target plus
 the straight, observed line from there, or the straight line from the robot where that is
-known free. Frontiers with
-unknown space behind them come first, then large ones, then any. Moving: the GMM gradient
-planner steers towards the next waypoint on the team's field, zero where the robot's footprint
-is known free (EM spans a doorway with the wall's components; the horizons saw through it),
-and on a field of what the sensor saw since the last-but-one submap (a robot avoids what it
-has just seen, shared or not).
+known free. Frontiers with unknown space behind them come first, then large ones, then any.
+Moving: the GMM gradient planner steers towards the next waypoint on the team's field, zero
+where the robot's footprint is known free (EM spans a doorway with the wall's components; the
+horizons saw through it), and on a field of what the sensor saw since the last-but-one submap
+(a robot avoids what it has just seen, shared or not).
 """
 
 from __future__ import annotations
@@ -320,14 +319,12 @@ class Explorer:
         dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.
-        goals = np.array([f.goal for f in fronts])
-        legs = np.linalg.norm(goals[:, None] - space.origins[None], axis=2)
-        legs[~space.seen_by(goals, shrink=BACK)] = np.inf
-        legs[np.arange(len(fronts)), [f.horizon for f in fronts]] = np.linalg.norm(
-            goals - space.origins[[f.horizon for f in fronts]], axis=1
-        )
+        goals, rows = np.array([f.goal for f in fronts]), np.arange(len(fronts))
+        seen = space.seen_by(goals, shrink=BACK)
+        seen[rows, [f.horizon for f in fronts]] = True
+        legs = np.where(seen, np.linalg.norm(goals[:, None] - space.origins[None], axis=2), np.inf)
         through = np.argmin(dist[None, : len(space)] + legs, axis=1)
-        via = dist[through] + legs[np.arange(len(fronts)), through]
+        via = dist[through] + legs[rows, through]
         # Straight there where the line is known free: a corridor's far end was seen from a
         # viewpoint behind the robot, and the route through it would go back first.
         straight = np.linalg.norm(goals - self.position, axis=1)
