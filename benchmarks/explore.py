@@ -98,9 +98,8 @@ def main() -> None:
     if args.sweep:
         sensors = args.sweep_sensors.split(",")
         out["sweep"] = sweep(args.sweep.split(","), sensors, args.robots, args.sweep_budget)
-    out["collisions"] = sum(r["collisions"] for c in cases for r in c["runs"].values()) + out.get(
-        "sweep", {}
-    ).get("collisions", 0)
+    in_cases = sum(r["collisions"] for c in cases for r in c["runs"].values())
+    out["collisions"] = in_cases + out.get("sweep", {}).get("collisions", 0)
     print(json.dumps(out, indent=1))
 
 

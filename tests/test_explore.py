@@ -165,8 +165,7 @@ def test_the_far_end_of_a_corridor_seen_lengthwise_is_still_a_goal(tmp_path):
     a frontier of one or two points, which must still be visited once nothing larger is left."""
     long = closed("long", 24.0, 1.6, [], (1.0, 0.8, 0.0))
     r = run_explore(config(saved(long, tmp_path), 1, reach=10.0))
-    x = np.array(r.paths[0])[:, 0]
-    assert x.max() > 12.0, "it stopped where it started"
+    assert np.array(r.paths[0])[:, 0].max() > 12.0, "it stopped where it started"
     assert r.coverage > 0.9 and r.collisions == 0
 
 

@@ -31,7 +31,14 @@ from scipy.spatial import cKDTree
 
 from gmmap.config import Config
 from gmmap.mapping.frame import Frame
-from gmmap.mapping.frontier import BACK, FreeSpace, Horizon, HorizonRecorder, encode_horizons
+from gmmap.mapping.frontier import (
+    BACK,
+    FreeSpace,
+    Horizon,
+    HorizonRecorder,
+    encode_horizons,
+    unit,
+)
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.planner import ARRIVED, OccupancyField, Route
 from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
@@ -374,7 +381,7 @@ class Explorer:
         )
         if len(near):
             # From just off the robot: it stands where it stands, even inside a margin.
-            off = self.position + 0.3 * _unit(space.origins[near] - self.position)
+            off = self.position + 0.3 * unit(space.origins[near] - self.position)
             clear = self._clear_lines(space, off, space.origins[near])
             edges += [(start, int(i)) for i in near[clear]]
         latest = pending[-1] if pending else k.last_own
@@ -465,8 +472,3 @@ class _MaxField:
             more = o > occ
             occ[more], grad[more] = o[more], g[more]
         return occ, grad
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)

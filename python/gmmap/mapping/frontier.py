@@ -259,7 +259,7 @@ class FreeSpace:
 
     def _open(self, probes: np.ndarray, targets: np.ndarray, blocked: Blocked) -> np.ndarray:
         """Whether each probe has unknown space behind it (`frontiers`)."""
-        away = _unit_rows(probes - targets)
+        away = unit(probes - targets)
         is_open = np.ones(len(probes), dtype=bool)
         for d in BEHIND:  # the occupancy field is the costly test: only where still open
             idx = np.flatnonzero(is_open)
@@ -307,5 +307,7 @@ class FreeSpace:
         return np.vstack(probes), np.vstack(targets), np.concatenate(owner)
 
 
-def _unit_rows(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-9)
+def unit(v: np.ndarray) -> np.ndarray:
+    """Vectors along the last axis scaled to length 1 (zero ones stay zero)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
