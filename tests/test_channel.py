@@ -5,6 +5,7 @@ Each robot is its own process, as in the field and the demo."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import pytest
 
 from gmmap.errors import TransportConfigError
 from gmmap.eval.links.channel import ChannelUnavailable, SharedChannel
+from gmmap.fleet.net.air import header, parse
 from gmmap.fleet.net.keys import listen_port
 from gmmap.options import TransportOptions
 
@@ -42,9 +44,16 @@ with Transport(TransportConfig("air", name, options)) as t:
             time.sleep(0.05)
         print(json.dumps(got), flush=True)
         sys.stdin.readline()  # leaving would put the session's farewells on the air
-    else:  # missed the broadcast: ask its owner over unicast
+    elif role == "fetch":  # missed the broadcast: ask its owner over unicast
         t.wait_for_peers(["r0"], 10)
         print(json.dumps([[seq, len(p)] for seq, p in t.fetch("r0", timeout=5)]), flush=True)
+    else:  # role "peers": who is present once all are, and after the next line
+        t.wait_for_peers({"r0", "r1", "r2"} - {name}, 10)
+        print(json.dumps(t.peers()), flush=True)
+        sys.stdin.readline()
+        time.sleep(0.5)
+        print(json.dumps(t.peers()), flush=True)
+        sys.stdin.readline()
 """
 
 
@@ -103,6 +112,49 @@ def test_a_robot_that_missed_a_broadcast_fetches_it_over_unicast(channel):
         sender.stdin.flush()
         sender.wait(timeout=20)
     assert fetched == [[0, PAYLOAD]]
+
+
+def test_robots_on_a_channel_meet_and_part_by_greetings_alone(channel):
+    """Presence on a shared channel is what is heard on it: no unicast session opens, and a
+    robot that leaves is gone for the others at once."""
+    ports = [listen_port() for _ in range(3)]
+    before = channel.bytes_sent()
+    robots = [_robot(channel, f"r{i}", ports[i], ports[:i], "peers") for i in range(3)]
+    try:
+        met = [json.loads(p.stdout.readline()) for p in robots]
+        on_air = channel.bytes_sent() - before
+        _say(robots[2], "who", "leave")
+        robots[2].wait(timeout=20)
+        _say(robots[0], "who")
+        after = json.loads(robots[0].stdout.readline())
+    finally:
+        for p in robots:
+            with contextlib.suppress(OSError):
+                _say(p, "done", "done")
+            p.wait(timeout=20)
+    assert met == [["r1", "r2"], ["r0", "r2"], ["r0", "r1"]]
+    # Three greetings and at most one answer per pair, ~60 B each: one Zenoh session's
+    # handshakes and declarations alone take ~960 B.
+    assert on_air < 600, on_air
+    assert after == ["r1"]
+
+
+def _say(p: subprocess.Popen, *lines: str) -> None:
+    p.stdin.write("".join(f"{line}\n" for line in lines))
+    p.stdin.flush()
+
+
+def test_a_datagram_on_the_air_carries_its_message_in_a_compact_header():
+    message = ("demo", "robot_0", "submap", 12)
+    datagram = header(*message) + b"payload"
+    assert len(header(*message)) == 17  # the key expression alone would take 28
+    assert parse(datagram) == (message, b"payload")
+    late = ("demo", "robot_0", "have", 1_733_400_000_000)  # adverts count milliseconds
+    assert parse(header(*late)) == (late, b"")
+    other = ("demo", "robot_0", "odd-kind", 3)
+    assert parse(header(*other) + b"x") == (other, b"x")
+    for bad in (datagram[:9], b"GMA1" + datagram[2:], b"G2\x02..\x01r\x00\x00", b""):
+        assert parse(bad) is None, bad
 
 
 @pytest.mark.parametrize(

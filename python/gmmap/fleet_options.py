@@ -34,15 +34,15 @@ class TransportOptions:
     ``broadcast``: on one radio channel shared by the fleet, a UDP multicast group
     (``udp/224.0.0.224:7447``, ``#iface=<name>`` to pick the interface, else the route to the
     group picks it; a loopback needs ``ip link set lo multicast on``): submaps and adverts go on
-    the air once for every robot in range (`gmmap.fleet.net.air`); presence, fetches and their
-    answers stay on the unicast links, which repair what a robot missed. Zenoh's gossip is off
-    there: each robot lists the peers it dials in ``connect``. Not in a secured fleet: the
-    group has no TLS. ``channel_rate``: the shared channel's bytes/s, all robots together; each
-    robot then sends (submaps, adverts and fetch answers) within an equal share of it over
-    the robots present and, with ``broadcast``, those heard on the air lately
+    the air once for every robot in range (`gmmap.fleet.net.air`), and presence is what is
+    heard there (greetings, `gmmap.fleet.net.transport`). A robot opens unicast sessions only
+    to fetch what it missed, to the peers listed in ``connect``, Zenoh's gossip off. Not in a
+    secured fleet: the group has no TLS. ``channel_rate``: the shared channel's bytes/s, all
+    robots together; each robot then sends (submaps, adverts and fetch answers) within an
+    equal share of it over the robots present and, with ``broadcast``, those heard lately
     (`gmmap.fleet.net.outbox.air_share`), and within ``robot.budget`` where that is lower.
     Without it, datagrams on a saturated channel are dropped (broadcast has no congestion
-    control) and the robots' TCP links stall behind them.
+    control).
     """
 
     #: Zenoh listen endpoints; null: one loopback endpoint on port

@@ -244,11 +244,8 @@ def _robot_config(
         # Gossip off: peers would tell each other their own endpoints and meet around a relay.
         peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
         zenoh.update(ZENOH_NO_GOSSIP)
-    else:
-        # On a shared channel each pair's session opens once, from one side: every attempt
-        # costs air time all robots share.
-        dials = [j for j in linked if j < i] if options.broadcast is not None else linked
-        peers = tuple(f"{options.link_protocol}/127.0.0.1:{ports[j]}" for j in dials)
+    else:  # on a shared channel dialled only to fetch what a robot missed
+        peers = tuple(f"{options.link_protocol}/127.0.0.1:{ports[j]}" for j in linked)
     transport = replace(
         options, mode=mode, listen=listen, port=ports[i], connect=peers,
         zenoh_options=zenoh,

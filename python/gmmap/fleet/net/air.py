@@ -5,13 +5,16 @@ The kernel's UDP multicast, not Zenoh's multicast transport: with three robots o
 Zenoh's multicast sessions (eclipse-zenoh 1.10) were seen to flood it at tens of MB/s, with or
 without gossip, in separate processes too, and each robot announces itself on the group every
 join interval, which a 500 B/s channel cannot spare. Here nothing goes on the air but the
-messages. There is no retransmission: what a robot missed (a lost datagram, a robot out of
-range or not yet started) it learns of from the sender's next advert and fetches over its
-unicast links (`gmmap.fleet.sharing.fetching`), which also carry everything else (presence,
-queries, fetch answers).
+messages and a robot's greetings (`gmmap.fleet.net.transport`: presence on a shared channel is
+what is heard on it). There is no retransmission: what a robot missed (a lost datagram, a robot
+out of range or not yet started) it learns of from the sender's next advert and fetches over a
+unicast session opened for that (`gmmap.fleet.sharing.fetching`).
 
-A datagram is ``b"GMA1"``, the key's length (u16, big-endian), the key (UTF-8) and the payload.
-A message too large for one datagram is not broadcast (`Air.fits`).
+A datagram is ``b"G2"``, the fleet's and the robot's names (each a u8 length and UTF-8), the
+kind (one byte: its index in `KINDS`, or 255, a u8 length and the name), the seq (an unsigned
+LEB128 varint) and the payload: 17 B of header for ``demo``/``robot_0``/``submap``/12, where the
+key expression ``gmmap/demo/robot_0/submap/12`` and a header would take 34. A message too
+large for one datagram is not broadcast (`Air.fits`).
 """
 
 from __future__ import annotations
@@ -21,16 +24,87 @@ import logging
 import socket
 import struct
 import threading
+import time
 from collections.abc import Callable
 
 from gmmap.errors import TransportError
 from gmmap.fleet_options import multicast_group
+from gmmap.names import NAME_RE
 
 log = logging.getLogger(__name__)
 
-MAGIC = b"GMA1"
-HEADER = struct.Struct(">4sH")
+MAGIC = b"G2"
+KINDS = ("submap", "have", "hello", "bye")  # one byte on the air; others are spelled out
+OTHER_KIND = 255
 MAX_DATAGRAM = 65_507  # bytes: IPv4's largest UDP payload
+TICK_S = 1.0  # how often ``on_tick`` runs, heard or not
+
+Message = tuple[str, str, str, int]  # fleet, robot, kind, seq
+
+
+def _text(name: str) -> bytes:
+    raw = name.encode()
+    if len(raw) > 255:
+        raise TransportError(f"a name on the air is at most 255 bytes; got {name!r}")
+    return bytes([len(raw)]) + raw
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte, n = n & 0x7F, n >> 7
+        out.append(byte | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def header(fleet: str, robot: str, kind: str, seq: int) -> bytes:
+    """A datagram's header, before its payload (module docstring)."""
+    code = bytes([KINDS.index(kind)]) if kind in KINDS else bytes([OTHER_KIND]) + _text(kind)
+    return MAGIC + _text(fleet) + _text(robot) + code + _varint(seq)
+
+
+def parse(datagram: bytes) -> tuple[Message, bytes] | None:
+    """((fleet, robot, kind, seq), payload), or None for a datagram that is not ours, is cut
+    short or names something that is not a name."""
+    if not datagram.startswith(MAGIC):
+        return None
+    try:
+        fleet, at = _name(datagram, len(MAGIC))
+        robot, at = _name(datagram, at)
+        code, at = datagram[at], at + 1
+        if code < len(KINDS):
+            kind = KINDS[code]
+        elif code == OTHER_KIND:
+            kind, at = _name(datagram, at)
+        else:
+            return None
+        seq, at = _uvarint(datagram, at)
+    except (IndexError, UnicodeDecodeError, ValueError):
+        return None
+    if not all(NAME_RE.fullmatch(name) for name in (fleet, robot, kind)):
+        return None
+    return (fleet, robot, kind, seq), datagram[at:]
+
+
+def _name(datagram: bytes, at: int) -> tuple[str, int]:
+    n = datagram[at]
+    raw = datagram[at + 1 : at + 1 + n]
+    if len(raw) != n:
+        raise IndexError("cut short")
+    return raw.decode(), at + 1 + n
+
+
+def _uvarint(datagram: bytes, at: int) -> tuple[int, int]:
+    value = shift = 0
+    while True:
+        byte, at = datagram[at], at + 1
+        value |= (byte & 0x7F) << shift
+        if not byte & 0x80:
+            return value, at
+        shift += 7
+        if shift > 63:
+            raise ValueError("a seq of more than 64 bits")
 
 
 def _mreqn(group: str, iface: str | None) -> bytes:
@@ -40,13 +114,20 @@ def _mreqn(group: str, iface: str | None) -> bytes:
 
 
 class Air:
-    """One robot's sender and receiver on the multicast group ``endpoint``; ``on_message(key,
-    payload)`` runs on the receiving thread for every datagram heard, own ones included."""
+    """One robot's sender and receiver on the multicast group ``endpoint``; on its receiving
+    thread ``on_message((fleet, robot, kind, seq), payload)`` runs for every datagram heard,
+    own ones included, and ``on_tick()`` about every `TICK_S`."""
 
-    def __init__(self, endpoint: str, on_message: Callable[[str, bytes], None]) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        on_message: Callable[[Message, bytes], None],
+        on_tick: Callable[[], None] = lambda: None,
+    ) -> None:
         host, port, iface = multicast_group(endpoint)
         self.group = (host, port)
-        self._on_message = on_message
+        self._on_message, self._on_tick = on_message, on_tick
+        self.last_sent = time.monotonic()
         try:
             self._send = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self._send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
@@ -59,6 +140,7 @@ class Air:
             self._recv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self._recv.bind((host, port))
             self._recv.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, _mreqn(host, iface))
+            self._recv.settimeout(TICK_S)
         except OSError as err:
             self.close()
             raise TransportError(f"cannot join the broadcast group {endpoint}: {err}") from err
@@ -67,16 +149,16 @@ class Air:
         self._thread.start()
 
     @staticmethod
-    def fits(key: str, payload_len: int) -> bool:
-        return HEADER.size + len(key.encode()) + payload_len <= MAX_DATAGRAM
+    def fits(message: Message, payload_len: int) -> bool:
+        return len(header(*message)) + payload_len <= MAX_DATAGRAM
 
-    def send(self, key: str, payload: bytes) -> None:
+    def send(self, message: Message, payload: bytes = b"") -> None:
         """Puts one message on the air; `TransportError` when the socket refuses it."""
-        raw = key.encode()
         try:
-            self._send.sendto(HEADER.pack(MAGIC, len(raw)) + raw + payload, self.group)
+            self._send.sendto(header(*message) + payload, self.group)
         except OSError as err:
-            raise TransportError(f"cannot broadcast {key}: {err}") from err
+            raise TransportError(f"cannot broadcast {message}: {err}") from err
+        self.last_sent = time.monotonic()
 
     def close(self) -> None:
         """Leaves the group. Idempotent."""
@@ -88,28 +170,19 @@ class Air:
                 sock.close()
 
     def _listen(self) -> None:
+        ticked = time.monotonic()
         while not self._closed:
             try:
-                datagram = self._recv.recv(MAX_DATAGRAM)
+                parsed = parse(self._recv.recv(MAX_DATAGRAM))
+            except TimeoutError:
+                parsed = None
             except OSError:
                 return  # closed
-            message = self._parse(datagram)
-            if message is not None:
-                try:
-                    self._on_message(*message)
-                except Exception:  # a bad message must not stop the receiver
-                    log.exception("gmmap air: dropping a message that could not be handled")
-
-    @staticmethod
-    def _parse(datagram: bytes) -> tuple[str, bytes] | None:
-        """(key, payload), or None for a datagram that is not ours or is cut short."""
-        if len(datagram) < HEADER.size:
-            return None
-        magic, n = HEADER.unpack_from(datagram)
-        if magic != MAGIC or HEADER.size + n > len(datagram):
-            return None
-        try:
-            key = datagram[HEADER.size : HEADER.size + n].decode()
-        except UnicodeDecodeError:
-            return None
-        return key, datagram[HEADER.size + n :]
+            try:
+                if parsed is not None:
+                    self._on_message(*parsed)
+                if time.monotonic() >= ticked + TICK_S:
+                    ticked = time.monotonic()
+                    self._on_tick()
+            except Exception:  # a bad message must not stop the receiver
+                log.exception("gmmap air: dropping a message that could not be handled")

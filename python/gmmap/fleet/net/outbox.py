@@ -43,8 +43,8 @@ log = logging.getLogger(__name__)
 
 BURST_S = 1.0  # the bucket holds this many seconds of budget (and at least one message)
 # Of a shared channel's bytes/s, what the robots' messages may take together: the rest is for
-# what the budget does not count (Zenoh's framing and keep-alives, presence, fetch queries,
-# TCP/IP headers and ACKs; docs/benchmarks.md, "channel").
+# what the budget does not count (UDP/IP headers, greetings, the sessions that repair what a
+# robot missed; docs/benchmarks.md, "channel").
 AIR_SHARE = 0.6
 
 

@@ -40,7 +40,8 @@ Roster = Callable[[], Iterable[str]]
 
 class Querying:
     """Fetch and tell over the transport's session (`gmmap.fleet.net.transport.Transport`, which
-    sets these attributes and defines ``_check_open``, ``peers`` and ``_take``)."""
+    sets these attributes and defines ``_check_open``, ``peers``, ``_take``, ``_broadcast``
+    and ``_unicast``)."""
 
     fleet: str
     robot: str
@@ -55,6 +56,8 @@ class Querying:
     _roster: Roster | None
     _budget: Budget
     _queryable: Any
+    _broadcast: Callable[[str, int, bytes | bytearray | memoryview], bool]
+    _unicast: Callable[[str, float], zenoh.Session]
 
     def tell(self, peer: str, kind: str, seq: int, payload: bytes | bytearray | memoryview) -> None:
         """Send ``payload`` as `publish` does, to ``peer`` alone (its queryable, `serve`), and
@@ -64,13 +67,17 @@ class Querying:
         check_name("kind", kind)
         data = as_payload(payload)
         key = reply_key(self.fleet, self.robot, kind, check_seq(seq), peer)
+        if self._broadcast(kind, seq, data):  # on a shared channel the others hear it too
+            self._counters.add("sent", self.robot, kind, len(data), len(key.encode()), False)
+            return
+        timeout = self.config.options.fetch_timeout
         try:
-            self._session.get(
+            self._unicast(key, timeout).get(
                 key,
                 lambda _reply: None,
                 target=zenoh.QueryTarget.ALL,
                 payload=data,
-                timeout=self.config.options.fetch_timeout,
+                timeout=timeout,
                 congestion_control=zenoh.CongestionControl.BLOCK,
                 allowed_destination=zenoh.Locality.REMOTE,
             )
@@ -209,7 +216,7 @@ class Querying:
             raise TransportConfigError(f"timeout must be > 0 s; got {timeout!r}")
         self._counters.bump("queries_sent")
         try:
-            replies = self._session.get(
+            replies = self._unicast(selector.partition("?")[0], timeout).get(
                 selector,
                 target=zenoh.QueryTarget.ALL,
                 consolidation=zenoh.ConsolidationMode.NONE,

@@ -35,6 +35,14 @@ well-formed key); dropped ones only increment ``ignored``.
 Presence: a robot that closes its transport leaves at once, one that dies when Zenoh's lease
 expires (60 s, `gmmap.fleet.net.session`). Two sessions of one name count as one robot.
 
+On a shared channel (`TransportOptions.broadcast`) everything a robot needs of its peers goes on
+the air (`gmmap.fleet.net.air`), so presence is what is heard there: a robot greets the channel
+(``hello``) when it starts and whenever it finds a robot new to it whose message may not have
+heard it, says ``bye`` when it closes, and counts as gone after `PRESENCE_S` unheard (it greets
+after `PRESENCE_S` / 3 of silence). No unicast session opens until a query needs one (`_unicast`):
+a second session, to the peers in ``connect``, which answer from the session they listen on.
+Where nothing is lost, no byte goes on the air but the messages and the greetings.
+
 Zenoh's callback threads only parse, count and queue each event. One worker runs the message and
 join/leave callbacks in arrival order, another answers fetches: a slow provider delays nothing.
 """
@@ -46,13 +54,13 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import zenoh
 
 from gmmap.errors import TransportConfigError, TransportError
-from gmmap.fleet.net.air import Air
+from gmmap.fleet.net.air import Air, Message
 from gmmap.fleet.net.counters import ByteCount, Counters
 from gmmap.fleet.net.keys import (
     PREFIX,
@@ -65,7 +73,7 @@ from gmmap.fleet.net.keys import (
 )
 from gmmap.fleet.net.outbox import Budget
 from gmmap.fleet.net.querying import DEFAULT_KIND, FetchProvider, Querying, Roster
-from gmmap.fleet.net.session import open_session
+from gmmap.fleet.net.session import handshake_timeout_ms, open_session
 from gmmap.fleet.net.worker import Worker, call_logged
 from gmmap.names import NAME_RE, check_name
 from gmmap.options import TransportOptions
@@ -92,6 +100,11 @@ MessageCallback = Callable[[str, str, int, bytes], None]
 """``callback(robot, kind, seq, payload)`` for a message of another robot of the fleet."""
 PeerCallback = Callable[[str], None]
 """``callback(robot)`` when a robot of the fleet joins or leaves."""
+
+# Presence on a shared channel: Zenoh's lease there (`gmmap.fleet.net.session.SHARED_LEASE`).
+PRESENCE_S = 120.0
+HELLO, BYE = "hello", "bye"  # seq 0: a robot that starts, 1: one that answers or keeps present
+MAX_HEARD = 1_024  # robots present from the air: forged names cannot grow it without bound
 
 
 @dataclass(frozen=True)
@@ -146,31 +159,42 @@ class Transport(Querying):
         self._queryable: Any = None
         self._probes: dict[str, zenoh.Publisher] = {}
         self._closed = False
+        options = config.options
+        shared = options.broadcast is not None
+        # A station watches: it is not a robot its peers would wait for.
+        self._announces = not config.watch and getattr(config.credentials, "role", None) != (
+            "station"
+        )
+        # On a shared channel the session only listens: peers dial it when they must fetch.
         self._session, self.listen_endpoints = open_session(
-            self.robot, config.options, config.credentials
+            self.robot, replace(options, connect=()) if shared else options, config.credentials
         )
         # On a shared channel messages go on the air once (`TransportOptions.broadcast`).
         self._air: Air | None = None
+        self._repair: zenoh.Session | None = None  # opened by the first query (`_unicast`)
+        self._repair_opened = 0.0
         self._talkers: dict[str, float] = {}  # robot → when it was last heard on the air
-        if config.options.broadcast is not None:
-            try:
-                self._air = Air(config.options.broadcast, self._on_air)
-            except TransportError:
-                self._session.close()
-                raise
+        self._heard: dict[str, float] = {}  # the same, for presence (`PRESENCE_S`)
         self._events = Worker(f"gmmap-transport-events-{self.robot}")
         self._queries = Worker(f"gmmap-transport-queries-{self.robot}")
+        if shared:
+            try:
+                self._air = Air(options.broadcast, self._on_air, self._on_tick)
+            except TransportError:
+                self.close()
+                raise
         try:
             liveliness = self._session.liveliness()
-            # A station watches: it is not a robot its peers would wait for.
-            if not config.watch and getattr(config.credentials, "role", None) != "station":
+            if self._announces:
                 self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
-            self._alive_subscriber = liveliness.declare_subscriber(
-                f"{PREFIX}/{self.fleet}/*", self._on_liveliness, history=True
-            )
+            if not shared:
+                self._alive_subscriber = liveliness.declare_subscriber(
+                    f"{PREFIX}/{self.fleet}/*", self._on_liveliness, history=True
+                )
         except zenoh.ZError as err:
             self.close()
             raise TransportError(f"cannot declare liveliness for {self.robot!r}: {err}") from err
+        self._greet(0)
 
     # ---- session ----------------------------------------------------------------------------
 
@@ -193,9 +217,14 @@ class Transport(Querying):
             self._present.clear()
             self._present_changed.notify_all()
         # Closing the session undeclares the token (peers see us leave), subscribers, queryable.
-        with contextlib.suppress(zenoh.ZError):
-            self._session.close()
+        for session in (self._session, self._repair):
+            if session is not None:
+                with contextlib.suppress(zenoh.ZError):
+                    session.close()
         if self._air is not None:
+            if self._announces:
+                with contextlib.suppress(TransportError):
+                    self._air.send((self.fleet, self.robot, BYE, 0))
             self._air.close()
         if hasattr(self, "_events"):
             self._events.stop()
@@ -218,13 +247,19 @@ class Transport(Querying):
         data = as_payload(payload)
         key = data_key(self.fleet, self.robot, kind, seq)
         try:
-            if self._air is not None and self._air.fits(key, len(data)):
-                self._air.send(key, bytes(data))
-            else:
+            if not self._broadcast(kind, seq, data):
                 self._session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
         except zenoh.ZError as err:
             raise TransportError(f"cannot publish {key}: {err}") from err
         self._counters.add("sent", self.robot, kind, len(data), len(key.encode()), False)
+
+    def _broadcast(self, kind: str, seq: int, data: bytes | bytearray | memoryview) -> bool:
+        """Puts a message on the air where there is one and it fits one datagram."""
+        message = (self.fleet, self.robot, kind, seq)
+        if self._air is None or not self._air.fits(message, len(data)):
+            return False
+        self._air.send(message, bytes(data))
+        return True
 
     def subscribe(self, callback: MessageCallback) -> None:
         """Call ``callback(robot, kind, seq, payload)`` for each message of another robot of this
@@ -270,18 +305,91 @@ class Transport(Querying):
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
 
-    def _on_air(self, key: str, payload: bytes) -> None:
+    def _on_air(self, message: Message, payload: bytes) -> None:
         # The air's thread: as `_on_sample`. Our own broadcasts come back too (other robots on
-        # this host must hear them): not "ignored", as a forged one with our name would be.
-        parsed = parse_data_key(key)
-        own = parsed is not None and parsed[:2] == (self.fleet, self.robot)
+        # this host must hear them), as would a forged one with our name: both are dropped.
+        fleet, robot, kind, seq = message
+        if fleet != self.fleet or robot == self.robot:
+            return
+        with self._lock:
+            self._talkers[robot] = time.monotonic()
+        if kind == BYE:
+            self._gone([robot])
+            return
+        self._present_on_air(robot, answer=kind != HELLO or seq == 0)
         # Taken once someone subscribes, as a put is.
-        hearing = self._data_subscriber is not None
-        if parsed is not None and parsed[0] == self.fleet and not own:
+        if kind != HELLO and self._data_subscriber is not None and not self._closed:
+            self._take(data_key(*message), message, payload)
+
+    def _present_on_air(self, robot: str, answer: bool) -> None:
+        """``robot`` was heard: it joins where it was not present, and where its message may
+        have gone out before it could hear us (``answer``), we greet it."""
+        with self._lock:
+            if self._closed or (robot not in self._heard and len(self._heard) >= MAX_HEARD):
+                return
+            self._heard[robot] = time.monotonic()
+            joined = robot not in self._present
+            if joined:
+                self._present.add(robot)
+                self._present_changed.notify_all()
+            callbacks = list(self._join_callbacks) if joined else []
+        for callback in callbacks:
+            self._events.submit(call_logged, callback, robot)
+        if joined and answer:
+            self._greet(1)
+
+    def _greet(self, seq: int) -> None:
+        """Says on the air that we are here (0: we start, 1: we answer or keep present)."""
+        if self._air is not None and self._announces and not self._closed:
+            with contextlib.suppress(TransportError):  # the next greeting may get through
+                self._air.send((self.fleet, self.robot, HELLO, seq))
+
+    def _on_tick(self) -> None:
+        # The air's thread, every second: the robots unheard for PRESENCE_S are gone, and a
+        # robot that said nothing for a third of it greets, so that it stays present.
+        now = time.monotonic()
+        with self._lock:
+            expired = [r for r, at in self._heard.items() if at < now - PRESENCE_S]
+        self._gone(expired)
+        if self._air is not None and now > self._air.last_sent + PRESENCE_S / 3:
+            self._greet(1)
+
+    def _gone(self, robots: list[str]) -> None:
+        for robot in robots:
             with self._lock:
-                self._talkers[parsed[1]] = time.monotonic()
-        if hearing and not self._closed and not own:
-            self._take(key, parsed, payload)
+                self._heard.pop(robot, None)
+                left = robot in self._present and not self._closed
+                if left:
+                    self._present.discard(robot)
+                    self._present_changed.notify_all()
+                callbacks = list(self._leave_callbacks) if left else []
+            for callback in callbacks:
+                self._events.submit(call_logged, callback, robot)
+
+    def _unicast(self, key: str, timeout: float) -> zenoh.Session:
+        """The session a query on ``key`` goes out on: ours, or on a shared channel a second
+        one, opened to the peers in ``connect`` by the first query; while its links open, a
+        query waits (up to ``timeout`` s) until some peer's answer to ``key`` is declared on it."""
+        if self._air is None:
+            return self._session
+        with self._declare_lock:
+            if self._repair is None:
+                options = replace(self.config.options, listen=())
+                self._repair, _ = open_session(self.robot, options)
+                self._repair_opened = time.monotonic()
+            session = self._repair
+        # Its links open in the background, slowly on a slow channel (`handshake_timeout_ms`).
+        opening = handshake_timeout_ms(self.config.options.channel_rate) / 1000
+        if time.monotonic() > self._repair_opened + opening:
+            return session
+        deadline = time.monotonic() + timeout
+        querier = session.declare_querier(key, allowed_destination=zenoh.Locality.REMOTE)
+        try:
+            while not querier.matching_status.matching and time.monotonic() < deadline:
+                time.sleep(0.05)
+        finally:
+            querier.undeclare()
+        return session
 
     def talkers(self, window_s: float) -> set[str]:
         """The other robots of the fleet heard on the air (`TransportOptions.broadcast`) in the

@@ -9,7 +9,8 @@ what it tells its peers it holds (`gmmap.fleet.sharing.holdings`), and when it l
 - After its frames it lingers (`Lingerer.linger`): it tells all what it holds when that is
   news to one of them, and ends once the peers in reach hold what it holds and it holds what
   they hold, and every robot it knows of is done mapping and its last submap is here, or at
-  ``robot.deadline``. It then leaves the fleet; the node finishes its matching.
+  ``robot.deadline``. It then leaves the fleet; the node finishes its matching. On a shared
+  channel its adverts go to all, and wait while its own submaps do.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from collections.abc import Callable
 
 from gmmap.fleet.net.outbox import Outbox
 from gmmap.fleet.sharing import holdings
-from gmmap.fleet.sharing.shared import Shared
+from gmmap.fleet.sharing.shared import KIND, Shared
 
 
 class Lingerer:
@@ -68,7 +69,10 @@ class Lingerer:
                 shared.arrivals.quiet(present),
                 (done, self._told_done),
             )
-            if holdings.advert_due(now, news, self._told_at):
+            # On a shared channel a robot whose own submaps still wait for the air is heard by
+            # all as it sends them, and no peer can end before the last: its adverts wait.
+            talking = shared.arrivals.shared_channel and bool(self.outbox.held(KIND))
+            if not talking and holdings.advert_due(now, news, self._told_at):
                 self.advertise(mine, holdings.LINGER)
             # The final advert may not make it out before the session closes: the last one must.
             settled = now >= max(changed, self._told_at) + holdings.SETTLE_S
@@ -109,7 +113,9 @@ class Lingerer:
             return
         shared = self.shared
         peers = shared.transport.peers()
+        # On a shared channel every robot in range hears it anyway.
         to = None if to is not None and 2 * len(to & set(peers)) >= len(peers) else to
+        to = None if shared.arrivals.shared_channel else to
         done = shared.holdings.finished(shared.robot, state, counts)
         with shared.lock:  # the lingering node and a peer's join both advertise
             if to is None:
