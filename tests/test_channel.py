@@ -1,5 +1,6 @@
 """Robots on one shared radio channel (`gmmap.eval.links.channel`): a broadcast goes on the air
-once for every robot that hears it, and what a robot missed it fetches over unicast.
+once for every robot that hears it, and what robots missed they ask for over unicast and hear
+again, once for all of them.
 
 Each robot is its own process, as in the field and the demo."""
 
@@ -22,7 +23,7 @@ from gmmap.options import TransportOptions
 GROUP = "udp/224.0.0.224:7447"  # the channel routes it on its loopback
 PAYLOAD = 700  # bytes: a submap's wire size
 
-# argv: name, own port, peers' ports, what to do ("send", "listen" or "fetch").
+# argv: name, own port, peers' ports, what to do ("send", "listen", "repair" or "peers").
 ROBOT = """
 import json, sys, time
 from gmmap.fleet.net.transport import Transport, TransportConfig, TransportOptions
@@ -38,15 +39,23 @@ with Transport(TransportConfig("air", name, options)) as t:
         sys.stdin.readline()  # the go
         t.publish("submap", 0, b"s" * 700)
         sys.stdin.readline()
+        print(t.stats()["totals"]["sent"]["fetch_messages"], flush=True)  # answers sent
     elif role == "listen":
         deadline = time.monotonic() + 20
         while not got and time.monotonic() < deadline:
             time.sleep(0.05)
         print(json.dumps(got), flush=True)
         sys.stdin.readline()  # leaving would put the session's farewells on the air
-    elif role == "fetch":  # missed the broadcast: ask its owner over unicast
+    elif role == "repair":  # missed the broadcast: ask its owner over unicast, at the word
         t.wait_for_peers(["r0"], 10)
-        print(json.dumps([[seq, len(p)] for seq, p in t.fetch("r0", timeout=5)]), flush=True)
+        print("met", flush=True)
+        sys.stdin.readline()
+        t.fetch("r0", timeout=5)
+        deadline = time.monotonic() + 20
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.05)
+        print(json.dumps(got), flush=True)
+        sys.stdin.readline()
     else:  # role "peers": who is present once all are, and after the next line
         t.wait_for_peers({"r0", "r1", "r2"} - {name}, 10)
         print(json.dumps(t.peers()), flush=True)
@@ -98,20 +107,28 @@ def test_one_broadcast_reaches_both_peers_and_crosses_the_air_once(channel):
     assert PAYLOAD <= on_air < 1.5 * PAYLOAD, on_air
 
 
-def test_a_robot_that_missed_a_broadcast_fetches_it_over_unicast(channel):
-    ports = [listen_port() for _ in range(2)]
+def test_robots_that_missed_a_broadcast_fetch_it_and_hear_it_again_once(channel):
+    """Two robots ask the owner over unicast for the submap they missed, at once: it goes on
+    the air again once, for both, not once per asker."""
+    ports = [listen_port() for _ in range(3)]
     sender = _robot(channel, "r0", ports[0], [], "send")
+    late = []
     try:
-        sender.stdin.write("go\n")  # nobody listens yet: the broadcast is lost to all
-        sender.stdin.flush()
-        late = _robot(channel, "r1", ports[1], ports[:1], "fetch")
-        fetched = json.loads(late.stdout.readline())
-        late.wait(timeout=20)
+        _say(sender, "go")  # nobody listens yet: the broadcast is lost to all
+        late = [_robot(channel, f"r{i}", ports[i], ports[:1], "repair") for i in (1, 2)]
+        assert [p.stdout.readline().strip() for p in late] == ["met", "met"]
+        for p in late:
+            _say(p, "fetch")
+        heard = [json.loads(p.stdout.readline()) for p in late]
+        _say(sender, "done")
+        answers = json.loads(sender.stdout.readline())
     finally:
-        sender.stdin.write("done\n")
-        sender.stdin.flush()
-        sender.wait(timeout=20)
-    assert fetched == [[0, PAYLOAD]]
+        for p in (sender, *late):
+            with contextlib.suppress(OSError):
+                _say(p, "done", "done")
+            p.wait(timeout=20)
+    assert heard == [[["r0", 0, PAYLOAD]], [["r0", 0, PAYLOAD]]]
+    assert answers == 1
 
 
 def test_robots_on_a_channel_meet_and_part_by_greetings_alone(channel):

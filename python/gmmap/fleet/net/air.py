@@ -115,8 +115,8 @@ def _mreqn(group: str, iface: str | None) -> bytes:
 
 class Air:
     """One robot's sender and receiver on the multicast group ``endpoint``; on its receiving
-    thread ``on_message((fleet, robot, kind, seq), payload)`` runs for every datagram heard,
-    own ones included, and ``on_tick()`` about every `TICK_S`."""
+    thread (`start`) ``on_message((fleet, robot, kind, seq), payload)`` runs for every datagram
+    heard, own ones included, and ``on_tick()`` about every `TICK_S`."""
 
     def __init__(
         self,
@@ -146,6 +146,9 @@ class Air:
             raise TransportError(f"cannot join the broadcast group {endpoint}: {err}") from err
         self._closed = False
         self._thread = threading.Thread(target=self._listen, name="gmmap-air", daemon=True)
+
+    def start(self) -> None:
+        """Starts hearing: the receiving thread."""
         self._thread.start()
 
     @staticmethod

@@ -85,13 +85,17 @@ def fetch_selector(
     since: int = 0,
     held: Iterable[int] = (),
     skip: Iterable[str] = (),
+    air: bool = False,
 ) -> str:
-    """A fetch query's `fetch_key` with its parameters (`parse_fetch`)."""
+    """A fetch query's `fetch_key` with its parameters (`parse_fetch`); ``air``: the asker
+    hears the shared channel, where an answer may come instead."""
     params = [f"since={since}"]
     if ranges := seq_ranges(s for s in held if s > since):
         params.append(f"held={ranges}")
     if names := ",".join(sorted(skip)):
         params.append(f"skip={names}")
+    if air:
+        params.append("air=1")
     return f"{fetch_key(fleet, robot, kind, via)}?{';'.join(params)}"
 
 
@@ -124,6 +128,7 @@ class FetchRequest:
     since: int
     held: tuple[tuple[int, int], ...] = ()
     skip: frozenset[str] = frozenset()
+    air: bool = False  # the asker hears the shared channel (`fetch_selector`)
 
     def wants(self, seq: object) -> bool:
         return (
@@ -134,8 +139,8 @@ class FetchRequest:
 
 
 def parse_fetch(key: str, parameters: Mapping[str, str]) -> FetchRequest | None:
-    """The request of a fetch query's key and parameters (``since``, ``held``, ``skip``); None
-    where malformed."""
+    """The request of a fetch query's key and parameters (``since``, ``held``, ``skip``,
+    ``air``); None where malformed."""
     parts = key.split("/")
     if len(parts) != 7 or parts[0] != PREFIX or parts[4] != "*" or parts[5] != VIA:
         return None
@@ -147,7 +152,8 @@ def parse_fetch(key: str, parameters: Mapping[str, str]) -> FetchRequest | None:
     if not since.isdigit() or held is None:
         return None
     skip = frozenset((parameters.get("skip") or "").split(",")) - {""}
-    return FetchRequest(fleet, robot, kind, int(since), tuple(held), skip)
+    air = parameters.get("air") == "1"
+    return FetchRequest(fleet, robot, kind, int(since), tuple(held), skip, air)
 
 
 MAX_RANGES = 256  # in a fetch's ``held`` parameter: a longer list is refused

@@ -40,8 +40,8 @@ Roster = Callable[[], Iterable[str]]
 
 class Querying:
     """Fetch and tell over the transport's session (`gmmap.fleet.net.transport.Transport`, which
-    sets these attributes and defines ``_check_open``, ``peers``, ``_take``, ``_broadcast``
-    and ``_unicast``)."""
+    sets these attributes and defines ``_check_open``, ``peers``, ``_take``, ``_broadcast``,
+    ``_aired_lately`` and ``_unicast``)."""
 
     fleet: str
     robot: str
@@ -57,6 +57,8 @@ class Querying:
     _budget: Budget
     _queryable: Any
     _broadcast: Callable[[str, int, bytes | bytearray | memoryview], bool]
+    _aired_lately: Callable[[str, int], bool]
+    _hearing: Any  # on a shared channel, `gmmap.fleet.net.hearing.Hearing`; else None
     _unicast: Callable[[str, float], zenoh.Session]
 
     def tell(self, peer: str, kind: str, seq: int, payload: bytes | bytearray | memoryview) -> None:
@@ -143,8 +145,16 @@ class Querying:
             found = sorted(h for h in found if request.wants(h[1]))
             for r, seq, payload in found:  # oldest first: a fetch cut short resumes at its gap
                 data, key = as_payload(payload), reply_key(self.fleet, r, kind, seq, self.robot)
+                # On a shared channel the asker hears, our own messages go on the air again,
+                # once for all the robots that missed them: they hear them as they heard us.
+                own = r == self.robot and request.air
+                if own and self._aired_lately(kind, seq):
+                    continue
                 if not budget.take(len(data) + len(key.encode()), lambda: self._closed):
                     return
+                if own and self._broadcast(kind, seq, data):
+                    self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
+                    continue
                 query.reply(key, data)
                 self._counters.add("sent", r, kind, len(data), len(key.encode()), True)
         finally:
@@ -168,7 +178,10 @@ class Querying:
         ``held`` already; or, with ``relay`` (or where ``robot`` is not present), the robots in
         between: ``via`` alone where given, else every peer holding them. Returns ``(seq,
         payload)`` sorted by seq, the first reply per seq winning, of what arrived within
-        ``timeout`` s (default ``config.fetch_timeout``); no peer serving gives an empty list."""
+        ``timeout`` s (default ``config.fetch_timeout``); no peer serving gives an empty list.
+        On a shared channel a robot asked for its own messages puts them on the air instead
+        (where both hear it): they come to the `subscribe` callbacks, for every robot that
+        missed them."""
         self._check_open()
         check_name("robot", robot)
         check_name("kind", kind)
@@ -177,8 +190,9 @@ class Querying:
             check_name("via", via)
         else:
             via = "*" if relay or robot not in self.peers() else robot
+        air = self._hearing is not None
         found = self._query(
-            fetch_selector(self.fleet, robot, kind, via, since_seq, held),
+            fetch_selector(self.fleet, robot, kind, via, since_seq, held, air=air),
             timeout,
             lambda p: p[:3] == (self.fleet, robot, kind) and p[3] >= since_seq,
         )

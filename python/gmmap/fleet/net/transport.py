@@ -35,13 +35,12 @@ well-formed key); dropped ones only increment ``ignored``.
 Presence: a robot that closes its transport leaves at once, one that dies when Zenoh's lease
 expires (60 s, `gmmap.fleet.net.session`). Two sessions of one name count as one robot.
 
-On a shared channel (`TransportOptions.broadcast`) everything a robot needs of its peers goes on
-the air (`gmmap.fleet.net.air`), so presence is what is heard there: a robot greets the channel
-(``hello``) when it starts and whenever it finds a robot new to it whose message may not have
-heard it, says ``bye`` when it closes, and counts as gone after `PRESENCE_S` unheard (it greets
-after `PRESENCE_S` / 3 of silence). No unicast session opens until a query needs one (`_unicast`):
-a second session, to the peers in ``connect``, which answer from the session they listen on.
-Where nothing is lost, no byte goes on the air but the messages and the greetings.
+On a shared channel (`TransportOptions.broadcast`) messages go on the air and presence is what
+is heard there (`gmmap.fleet.net.hearing`). No unicast session opens until a query needs one
+(`Transport._unicast`): a second session, to the peers in ``connect``, which answer from the
+session they listen on. A robot asked by a robot on the air for its own messages puts them on
+the air again instead of answering (`Querying.fetch`). Where nothing is lost, no byte goes on
+the air but the messages and the greetings.
 
 Zenoh's callback threads only parse, count and queue each event. One worker runs the message and
 join/leave callbacks in arrival order, another answers fetches: a slow provider delays nothing.
@@ -60,8 +59,9 @@ from typing import Any
 import zenoh
 
 from gmmap.errors import TransportConfigError, TransportError
-from gmmap.fleet.net.air import Air, Message
+from gmmap.fleet.net.air import Message
 from gmmap.fleet.net.counters import ByteCount, Counters
+from gmmap.fleet.net.hearing import Hearing
 from gmmap.fleet.net.keys import (
     PREFIX,
     alive_key,
@@ -100,11 +100,6 @@ MessageCallback = Callable[[str, str, int, bytes], None]
 """``callback(robot, kind, seq, payload)`` for a message of another robot of the fleet."""
 PeerCallback = Callable[[str], None]
 """``callback(robot)`` when a robot of the fleet joins or leaves."""
-
-# Presence on a shared channel: Zenoh's lease there (`gmmap.fleet.net.session.SHARED_LEASE`).
-PRESENCE_S = 120.0
-HELLO, BYE = "hello", "bye"  # seq 0: a robot that starts, 1: one that answers or keeps present
-MAX_HEARD = 1_024  # robots present from the air: forged names cannot grow it without bound
 
 
 @dataclass(frozen=True)
@@ -162,30 +157,29 @@ class Transport(Querying):
         options = config.options
         shared = options.broadcast is not None
         # A station watches: it is not a robot its peers would wait for.
-        self._announces = not config.watch and getattr(config.credentials, "role", None) != (
-            "station"
-        )
+        announces = not config.watch and getattr(config.credentials, "role", None) != "station"
         # On a shared channel the session only listens: peers dial it when they must fetch.
         self._session, self.listen_endpoints = open_session(
             self.robot, replace(options, connect=()) if shared else options, config.credentials
         )
         # On a shared channel messages go on the air once (`TransportOptions.broadcast`).
-        self._air: Air | None = None
+        self._hearing: Hearing | None = None
         self._repair: zenoh.Session | None = None  # opened by the first query (`_unicast`)
         self._repair_opened = 0.0
-        self._talkers: dict[str, float] = {}  # robot → when it was last heard on the air
-        self._heard: dict[str, float] = {}  # the same, for presence (`PRESENCE_S`)
         self._events = Worker(f"gmmap-transport-events-{self.robot}")
         self._queries = Worker(f"gmmap-transport-queries-{self.robot}")
         if shared:
             try:
-                self._air = Air(options.broadcast, self._on_air, self._on_tick)
+                self._hearing = Hearing(
+                    options.broadcast, self.fleet, self.robot, announces, self._heard,
+                    self._set_present,
+                )  # fmt: skip
             except TransportError:
                 self.close()
                 raise
         try:
             liveliness = self._session.liveliness()
-            if self._announces:
+            if announces:
                 self._token = liveliness.declare_token(alive_key(self.fleet, self.robot))
             if not shared:
                 self._alive_subscriber = liveliness.declare_subscriber(
@@ -194,7 +188,8 @@ class Transport(Querying):
         except zenoh.ZError as err:
             self.close()
             raise TransportError(f"cannot declare liveliness for {self.robot!r}: {err}") from err
-        self._greet(0)
+        if self._hearing is not None:
+            self._hearing.greet(0)
 
     # ---- session ----------------------------------------------------------------------------
 
@@ -221,11 +216,8 @@ class Transport(Querying):
             if session is not None:
                 with contextlib.suppress(zenoh.ZError):
                     session.close()
-        if self._air is not None:
-            if self._announces:
-                with contextlib.suppress(TransportError):
-                    self._air.send((self.fleet, self.robot, BYE, 0))
-            self._air.close()
+        if self._hearing is not None:
+            self._hearing.close()
         if hasattr(self, "_events"):
             self._events.stop()
             self._queries.stop()
@@ -255,11 +247,11 @@ class Transport(Querying):
 
     def _broadcast(self, kind: str, seq: int, data: bytes | bytearray | memoryview) -> bool:
         """Puts a message on the air where there is one and it fits one datagram."""
-        message = (self.fleet, self.robot, kind, seq)
-        if self._air is None or not self._air.fits(message, len(data)):
-            return False
-        self._air.send(message, bytes(data))
-        return True
+        return self._hearing is not None and self._hearing.send(kind, seq, data)
+
+    def _aired_lately(self, kind: str, seq: int) -> bool:
+        """`Hearing.aired_lately`; False without a shared channel."""
+        return self._hearing is not None and self._hearing.aired_lately(kind, seq)
 
     def subscribe(self, callback: MessageCallback) -> None:
         """Call ``callback(robot, kind, seq, payload)`` for each message of another robot of this
@@ -305,72 +297,16 @@ class Transport(Querying):
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
 
-    def _on_air(self, message: Message, payload: bytes) -> None:
-        # The air's thread: as `_on_sample`. Our own broadcasts come back too (other robots on
-        # this host must hear them), as would a forged one with our name: both are dropped.
-        fleet, robot, kind, seq = message
-        if fleet != self.fleet or robot == self.robot:
-            return
-        with self._lock:
-            self._talkers[robot] = time.monotonic()
-        if kind == BYE:
-            self._gone([robot])
-            return
-        self._present_on_air(robot, answer=kind != HELLO or seq == 0)
-        # Taken once someone subscribes, as a put is.
-        if kind != HELLO and self._data_subscriber is not None and not self._closed:
+    def _heard(self, message: Message, payload: bytes) -> None:
+        # The air's thread: as `_on_sample`; taken once someone subscribes, as a put is.
+        if self._data_subscriber is not None and not self._closed:
             self._take(data_key(*message), message, payload)
-
-    def _present_on_air(self, robot: str, answer: bool) -> None:
-        """``robot`` was heard: it joins where it was not present, and where its message may
-        have gone out before it could hear us (``answer``), we greet it."""
-        with self._lock:
-            if self._closed or (robot not in self._heard and len(self._heard) >= MAX_HEARD):
-                return
-            self._heard[robot] = time.monotonic()
-            joined = robot not in self._present
-            if joined:
-                self._present.add(robot)
-                self._present_changed.notify_all()
-            callbacks = list(self._join_callbacks) if joined else []
-        for callback in callbacks:
-            self._events.submit(call_logged, callback, robot)
-        if joined and answer:
-            self._greet(1)
-
-    def _greet(self, seq: int) -> None:
-        """Says on the air that we are here (0: we start, 1: we answer or keep present)."""
-        if self._air is not None and self._announces and not self._closed:
-            with contextlib.suppress(TransportError):  # the next greeting may get through
-                self._air.send((self.fleet, self.robot, HELLO, seq))
-
-    def _on_tick(self) -> None:
-        # The air's thread, every second: the robots unheard for PRESENCE_S are gone, and a
-        # robot that said nothing for a third of it greets, so that it stays present.
-        now = time.monotonic()
-        with self._lock:
-            expired = [r for r, at in self._heard.items() if at < now - PRESENCE_S]
-        self._gone(expired)
-        if self._air is not None and now > self._air.last_sent + PRESENCE_S / 3:
-            self._greet(1)
-
-    def _gone(self, robots: list[str]) -> None:
-        for robot in robots:
-            with self._lock:
-                self._heard.pop(robot, None)
-                left = robot in self._present and not self._closed
-                if left:
-                    self._present.discard(robot)
-                    self._present_changed.notify_all()
-                callbacks = list(self._leave_callbacks) if left else []
-            for callback in callbacks:
-                self._events.submit(call_logged, callback, robot)
 
     def _unicast(self, key: str, timeout: float) -> zenoh.Session:
         """The session a query on ``key`` goes out on: ours, or on a shared channel a second
         one, opened to the peers in ``connect`` by the first query; while its links open, a
         query waits (up to ``timeout`` s) until some peer's answer to ``key`` is declared on it."""
-        if self._air is None:
+        if self._hearing is None:
             return self._session
         with self._declare_lock:
             if self._repair is None:
@@ -394,11 +330,7 @@ class Transport(Querying):
     def talkers(self, window_s: float) -> set[str]:
         """The other robots of the fleet heard on the air (`TransportOptions.broadcast`) in the
         last ``window_s`` s."""
-        since = time.monotonic() - window_s
-        with self._lock:
-            # Forgotten once out of the window: names forged on the air do not pile up.
-            self._talkers = {r: at for r, at in self._talkers.items() if at >= since}
-            return set(self._talkers)
+        return set() if self._hearing is None else self._hearing.talkers(window_s)
 
     def _take(
         self, key: str, parsed: tuple[str, str, str, int] | None, data: zenoh.ZBytes | bytes
@@ -462,15 +394,20 @@ class Transport(Querying):
         robot = parts[2]
         if robot == self.robot:
             return
-        joined = sample.kind == zenoh.SampleKind.PUT
+        self._set_present(robot, sample.kind == zenoh.SampleKind.PUT)
+
+    def _set_present(self, robot: str, present: bool) -> bool:
+        """Marks ``robot`` present or gone and runs the join or leave callbacks where that
+        changed; whether it did."""
         with self._lock:
-            if self._closed or (robot in self._present) == joined:
-                return
-            (self._present.add if joined else self._present.discard)(robot)
+            if self._closed or (robot in self._present) == present:
+                return False
+            (self._present.add if present else self._present.discard)(robot)
             self._present_changed.notify_all()
-            callbacks = list(self._join_callbacks if joined else self._leave_callbacks)
+            callbacks = list(self._join_callbacks if present else self._leave_callbacks)
         for callback in callbacks:
             self._events.submit(call_logged, callback, robot)
+        return True
 
     # ---- accounting -------------------------------------------------------------------------
 

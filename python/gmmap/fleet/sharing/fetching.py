@@ -103,7 +103,8 @@ class Fetcher:
             got = self._relayed(r, since, held, probe)
         else:
             got = transport.fetch(r, KIND, since, held=held)
-        if not got and not relay and arrivals.unanswered(r, asked):
+        # On a shared channel the robot answers on the air: its answer is on its way here.
+        if not got and not relay and not arrivals.shared_channel and arrivals.unanswered(r, asked):
             # Its link to us stalled: at once through those in between.
             got = self._relayed(r, since, held, probe=False)
         for seq, payload in got:
