@@ -256,3 +256,25 @@ def test_the_demo_explores_when_asked(tmp_path):
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert report["robots"] == 2 and "baselines" not in report and report["coverage"] > 0.8
+
+
+def test_a_footprint_that_a_wall_cuts_between_its_test_points_is_not_known_free():
+    """A horizon sees a wall 1 m out; a robot whose radius plus margin (0.25 m) reaches past
+    it must not take its footprint for free, wherever the wall falls between test points."""
+    normal = np.radians(22.5)  # halfway between two of 8 test directions
+    lo = np.arange(360.0)
+    nearest = np.radians(np.clip(22.5, lo, lo + 1) - 22.5)  # each 1° bin's nearest wall point
+    ranges = np.where(np.cos(nearest) > 0.2, 1.0 / np.maximum(np.cos(nearest), 0.2), 5.0)
+    space = FreeSpace([Horizon(np.zeros(2), np.minimum(ranges, 5.0))])
+    n = np.array([np.cos(normal), np.sin(normal)])
+    explorer = Explorer("a")
+    assert explorer.roomy(0.74 * n[None], space)[0]  # 0.26 m from the wall
+    assert not explorer.roomy(0.755 * n[None], space)[0]  # 0.245 m: the wall cuts it
+
+
+def test_where_a_robot_stood_is_free_but_not_seen_through():
+    """The disc about a viewpoint is free for routes, not for the planner's field: a depth
+    camera never sees beside its robot, which may have passed a wall within that disc."""
+    space = FreeSpace([Horizon(np.zeros(2), np.full(72, np.nan))])
+    assert space.contains(np.array([[0.3, 0.0]]))[0]
+    assert not Explorer("a").roomy(np.zeros((1, 2)), space)[0]

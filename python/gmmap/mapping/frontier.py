@@ -191,27 +191,33 @@ class FreeSpace:
     def _bin(self, angle: np.ndarray) -> np.ndarray:
         return np.floor(angle / (2 * math.pi) * self.bins).astype(int) % self.bins
 
-    def contains(self, xy: object, shrink: float = 0.0, near: float = 30.0) -> np.ndarray:
-        """Whether each (N, 2) point is known free: inside some horizon by ``shrink`` m (or
-        within ``BODY`` of its viewpoint)."""
+    def contains(
+        self, xy: object, shrink: float = 0.0, near: float = 30.0, body: bool = True
+    ) -> np.ndarray:
+        """Whether each (N, 2) point is known free: inside some horizon by ``shrink`` m (or,
+        with ``body``, within ``BODY`` of its viewpoint)."""
         pts = np.atleast_2d(np.asarray(xy, dtype=np.float64))
         inside = np.zeros(len(pts), dtype=bool)
         if not len(self) or not len(pts):
             return inside
         for start in range(0, len(pts), 2048):
             inside[start : start + 2048] = self.seen_by(
-                pts[start : start + 2048], shrink, near
+                pts[start : start + 2048], shrink, near, body
             ).any(axis=1)
         return inside
 
-    def seen_by(self, xy: np.ndarray, shrink: float = 0.0, near: float = 30.0) -> np.ndarray:
+    def seen_by(
+        self, xy: np.ndarray, shrink: float = 0.0, near: float = 30.0, body: bool = True
+    ) -> np.ndarray:
         """(N, H): whether each point is inside each horizon by ``shrink`` m, so that the
-        straight line from that horizon's viewpoint to it is known free (star-shaped)."""
+        straight line from that horizon's viewpoint to it is known free (star-shaped); with
+        ``body``, the disc of ``BODY`` about its viewpoint counts whatever was seen."""
         d = np.atleast_2d(xy)[:, None, :] - self.origins[None]
         r = np.hypot(d[..., 0], d[..., 1])
         b = self._bin(np.arctan2(d[..., 1], d[..., 0]))
         lim = self.ranges[np.arange(len(self))[None], b]
-        return (r < np.fmax(np.nan_to_num(lim, nan=-1.0), BODY) - shrink) & (r < near)
+        lim = np.nan_to_num(lim, nan=-1.0)
+        return (r < (np.fmax(lim, BODY) if body else lim) - shrink) & (r < near)
 
     def frontiers(
         self, blocked: Blocked, spacing: float = 0.25, back: float = BACK, link: float = 0.75
