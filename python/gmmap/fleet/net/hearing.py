@@ -2,13 +2,13 @@
 the air (`gmmap.fleet.net.air`) and who it hears there.
 
 Everything a robot needs of its peers goes on the air, so presence is what is heard there: a
-robot greets the channel (``hello``, no payload) when it starts and whenever it finds a robot
-new to it whose message may have gone out before that robot could hear it (any message but
-an answering greeting), says ``bye`` when it closes, and counts as gone after `PRESENCE_S`
-unheard (it greets after `PRESENCE_S` / 3 of silence). Three robots meet in ~6 datagrams of
-~60 B, where one Zenoh session's handshakes and declarations take ~960 B. Its own messages a
-robot is asked for again it puts on the air again, once for all that ask within `REAIRED_S`
-(`Hearing.aired_lately`).
+robot greets the channel (``hello``, no payload) when it starts, answers every robot that
+starts (a restarted one may still count as present) and every robot new to it by another
+message (it may have started before we listened), says ``bye`` when it closes, and counts as
+gone after `PRESENCE_S` unheard (it greets after `PRESENCE_S` / 3 of silence). Three robots
+meet in ~6 datagrams of ~60 B, where one Zenoh session's handshakes and declarations take
+~960 B. Its own messages a robot is asked for again it puts on the air again, once for all
+that ask within `REAIRED_S` (`Hearing.aired_lately`).
 """
 
 from __future__ import annotations
@@ -114,7 +114,8 @@ class Hearing:
         if kind == BYE:
             self._present(robot, False)
             return
-        if self._present(robot, True) and (kind != HELLO or seq == 0):
+        joined = self._present(robot, True)
+        if (kind == HELLO and seq == 0) or (joined and kind != HELLO):
             self.greet(1)
         if kind != HELLO:
             self._take(message, payload)

@@ -40,7 +40,8 @@ is heard there (`gmmap.fleet.net.hearing`). No unicast session opens until a que
 (`Transport._unicast`): a second session, to the peers in ``connect``, which answer from the
 session they listen on. A robot asked by a robot on the air for its own messages puts them on
 the air again instead of answering (`Querying.fetch`). Where nothing is lost, no byte goes on
-the air but the messages and the greetings.
+the air but the messages and the greetings. A message too large for one datagram is put, and
+reaches only the sessions that dialled ours: the peers fetch it after the sender's advert.
 
 Zenoh's callback threads only parse, count and queue each event. One worker runs the message and
 join/leave callbacks in arrival order, another answers fetches: a slow provider delays nothing.
@@ -171,7 +172,7 @@ class Transport(Querying):
         if shared:
             try:
                 self._hearing = Hearing(
-                    options.broadcast, self.fleet, self.robot, announces, self._heard,
+                    options.broadcast, self.fleet, self.robot, announces, self._from_air,
                     self._set_present,
                 )  # fmt: skip
             except TransportError:
@@ -297,7 +298,7 @@ class Transport(Querying):
         except Exception:  # never let a bad sample take down Zenoh's callback thread
             log.exception("gmmap transport: dropping a sample that could not be handled")
 
-    def _heard(self, message: Message, payload: bytes) -> None:
+    def _from_air(self, message: Message, payload: bytes) -> None:
         # The air's thread: as `_on_sample`; taken once someone subscribes, as a put is.
         if self._data_subscriber is not None and not self._closed:
             self._take(data_key(*message), message, payload)
