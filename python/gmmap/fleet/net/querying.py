@@ -145,7 +145,7 @@ class Querying:
             found = sorted(h for h in found if request.wants(h[1]))
             for r, seq, payload in found:  # oldest first: a fetch cut short resumes at its gap
                 data, key = as_payload(payload), reply_key(self.fleet, r, kind, seq, self.robot)
-                # On a shared channel the asker hears, our own messages go on the air again,
+                # Where the asker hears a shared channel, our own messages go on the air again,
                 # once for all the robots that missed them: they hear them as they heard us.
                 own = r == self.robot and request.air
                 if own and self._aired_lately(kind, seq):
