@@ -2,8 +2,9 @@
 
 math < mapping < fleet; io beside fleet; eval and cli on top. config, options and errors are
 leaves every layer may use. Inside fleet the sub-packages point one way (wire < storage <
-sharing < node, security < net < sharing), no import circle runs through it, and nothing in it
-imports the emulated links (gmmap.eval.links). No package folder holds more than 16 modules.
+sharing < node, security < net < sharing, wire < net), no import circle runs through it, and
+nothing in it imports the emulated links (gmmap.eval.links). No package folder holds more than
+16 modules.
 """
 
 import ast
@@ -29,7 +30,7 @@ FLEET_USES = {
     "wire": set(),
     "security": set(),
     "storage": {"wire"},
-    "net": {"security"},
+    "net": {"security", "wire"},
     "sharing": {"wire", "storage", "net"},
     "node": {"wire", "storage", "security", "net", "sharing"},
 }

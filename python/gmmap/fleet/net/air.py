@@ -10,11 +10,12 @@ what is heard on it). There is no retransmission: what a robot missed (a lost da
 out of range or not yet started) it learns of from the sender's next advert and fetches over a
 unicast session opened for that (`gmmap.fleet.sharing.fetching`).
 
-A datagram is ``b"G2"``, the fleet's and the robot's names (each a u8 length and UTF-8), the
-kind (one byte: its index in `KINDS`, or 255, a u8 length and the name), the seq (an unsigned
-LEB128 varint) and the payload: 17 B of header for ``demo``/``robot_0``/``submap``/12, where the
-key expression ``gmmap/demo/robot_0/submap/12`` and a header would take 34. A message too
-large for one datagram is not broadcast (`Air.fits`).
+A datagram is ``b"G2"``, the fleet's and the robot's names (each a LEB128 length and UTF-8, as
+in adverts: `gmmap.fleet.wire.bitstream`), the kind (one byte: its index in `KINDS`, or 255 and
+the name), the seq (an unsigned LEB128 varint) and the payload: 17 B of header for
+``demo``/``robot_0``/``submap``/12, where the key expression ``gmmap/demo/robot_0/submap/12``
+and a header would take 34. A message too large for one datagram is not broadcast
+(`Air.send` says so).
 """
 
 from __future__ import annotations
@@ -27,9 +28,9 @@ import threading
 import time
 from collections.abc import Callable
 
-from gmmap.errors import TransportError
+from gmmap.errors import DecodeError, TransportError
+from gmmap.fleet.wire.bitstream import _Reader, _Writer
 from gmmap.fleet_options import multicast_group
-from gmmap.names import NAME_RE
 
 log = logging.getLogger(__name__)
 
@@ -42,26 +43,17 @@ TICK_S = 1.0  # how often ``on_tick`` runs, heard or not
 Message = tuple[str, str, str, int]  # fleet, robot, kind, seq
 
 
-def _text(name: str) -> bytes:
-    raw = name.encode()
-    if len(raw) > 255:
-        raise TransportError(f"a name on the air is at most 255 bytes; got {name!r}")
-    return bytes([len(raw)]) + raw
-
-
-def _varint(n: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte, n = n & 0x7F, n >> 7
-        out.append(byte | (0x80 if n else 0))
-        if not n:
-            return bytes(out)
-
-
 def header(fleet: str, robot: str, kind: str, seq: int) -> bytes:
     """A datagram's header, before its payload (module docstring)."""
-    code = bytes([KINDS.index(kind)]) if kind in KINDS else bytes([OTHER_KIND]) + _text(kind)
-    return MAGIC + _text(fleet) + _text(robot) + code + _varint(seq)
+    w = _Writer()
+    w.raw(MAGIC)
+    w.name(fleet)
+    w.name(robot)
+    w.u8(KINDS.index(kind) if kind in KINDS else OTHER_KIND)
+    if kind not in KINDS:
+        w.name(kind)
+    w.uvarint(seq)
+    return bytes(w.buf)
 
 
 def parse(datagram: bytes) -> tuple[Message, bytes] | None:
@@ -69,42 +61,21 @@ def parse(datagram: bytes) -> tuple[Message, bytes] | None:
     short or names something that is not a name."""
     if not datagram.startswith(MAGIC):
         return None
+    r = _Reader(datagram)
+    r.pos = len(MAGIC)
     try:
-        fleet, at = _name(datagram, len(MAGIC))
-        robot, at = _name(datagram, at)
-        code, at = datagram[at], at + 1
+        fleet, robot = r.name("fleet"), r.name("robot")
+        code = r.u8("kind")
         if code < len(KINDS):
             kind = KINDS[code]
         elif code == OTHER_KIND:
-            kind, at = _name(datagram, at)
+            kind = r.name("kind")
         else:
             return None
-        seq, at = _uvarint(datagram, at)
-    except (IndexError, UnicodeDecodeError, ValueError):
+        seq = r.uvarint("seq", 2**64 - 1)
+    except DecodeError:
         return None
-    if not all(NAME_RE.fullmatch(name) for name in (fleet, robot, kind)):
-        return None
-    return (fleet, robot, kind, seq), datagram[at:]
-
-
-def _name(datagram: bytes, at: int) -> tuple[str, int]:
-    n = datagram[at]
-    raw = datagram[at + 1 : at + 1 + n]
-    if len(raw) != n:
-        raise IndexError("cut short")
-    return raw.decode(), at + 1 + n
-
-
-def _uvarint(datagram: bytes, at: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte, at = datagram[at], at + 1
-        value |= (byte & 0x7F) << shift
-        if not byte & 0x80:
-            return value, at
-        shift += 7
-        if shift > 63:
-            raise ValueError("a seq of more than 64 bits")
+    return (fleet, robot, kind, seq), r.rest()
 
 
 def _mreqn(group: str, iface: str | None) -> bytes:
@@ -151,17 +122,18 @@ class Air:
         """Starts hearing: the receiving thread."""
         self._thread.start()
 
-    @staticmethod
-    def fits(message: Message, payload_len: int) -> bool:
-        return len(header(*message)) + payload_len <= MAX_DATAGRAM
-
-    def send(self, message: Message, payload: bytes = b"") -> None:
-        """Puts one message on the air; `TransportError` when the socket refuses it."""
+    def send(self, message: Message, payload: bytes = b"") -> bool:
+        """Puts one message on the air; False where it does not fit one datagram,
+        `TransportError` where the socket refuses it."""
+        datagram = header(*message) + payload
+        if len(datagram) > MAX_DATAGRAM:
+            return False
         try:
-            self._send.sendto(header(*message) + payload, self.group)
+            self._send.sendto(datagram, self.group)
         except OSError as err:
             raise TransportError(f"cannot broadcast {message}: {err}") from err
         self.last_sent = time.monotonic()
+        return True
 
     def close(self) -> None:
         """Leaves the group. Idempotent."""

@@ -57,11 +57,7 @@ class Hearing:
 
     def send(self, kind: str, seq: int, data: bytes | bytearray | memoryview) -> bool:
         """Puts our message on the air where it fits one datagram (else False)."""
-        message = (self.fleet, self.robot, kind, seq)
-        if not self.air.fits(message, len(data)):
-            return False
-        self.air.send(message, bytes(data))
-        return True
+        return self.air.send((self.fleet, self.robot, kind, seq), bytes(data))
 
     def greet(self, seq: int) -> None:
         """Says on the air that we are here (0: we start, 1: we answer or keep present)."""

@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 from gmmap.errors import DecodeError
 from gmmap.fleet.wire.bitstream import _Reader, _Writer
-from gmmap.names import NAME_RE
 
 KIND = "have"
 # What a robot holds goes to a peer SETTLE_S after it joins (if it holds anything); and while
@@ -67,7 +66,7 @@ def encode(
     names = sorted(counts)
     w.uvarint(len(names))
     for name in names:
-        _name(w, name)
+        w.name(name)
         w.uvarint(counts[name])
     index = {name: i for i, name in enumerate(names)}
     heard = sorted(reach)
@@ -86,20 +85,7 @@ def _ref(w: _Writer, name: str, index: Mapping[str, int]) -> None:
     """A robot as its index among the counted ones, or, past them, its name."""
     w.uvarint(index.get(name, len(index)))
     if name not in index:
-        _name(w, name)
-
-
-def _name(w: _Writer, name: str) -> None:
-    raw = name.encode()
-    w.uvarint(len(raw))
-    w.raw(raw)
-
-
-def _read_name(r: _Reader) -> str:
-    name = r.take(r.uvarint("name length", 255), "name").decode()
-    if not NAME_RE.fullmatch(name):
-        raise DecodeError(f"{name!r} is not a robot name")
-    return name
+        w.name(name)
 
 
 def decode(payload: bytes) -> Advert | None:
@@ -111,7 +97,7 @@ def decode(payload: bytes) -> Advert | None:
         state = STATES[r.uvarint("state", len(STATES) - 1)]
         names, counts = [], {}
         for _ in range(r.uvarint("robots", MAX_ROBOTS)):
-            names.append(_read_name(r))
+            names.append(r.name("robot"))
             counts[names[-1]] = r.uvarint("count", MAX_COUNT)
         reach = [_read_ref(r, names) for _ in range(r.uvarint("robots heard", MAX_ROBOTS))]
         done = {}
@@ -120,14 +106,14 @@ def decode(payload: bytes) -> Advert | None:
             done[name] = r.uvarint("built", MAX_COUNT)
         if r.pos != len(payload) or len(counts) != len(names):
             return None  # trailing bytes, or a robot named twice
-    except (DecodeError, UnicodeDecodeError):
+    except DecodeError:
         return None
     return Advert(counts, state, tuple(reach), done)
 
 
 def _read_ref(r: _Reader, names: list[str]) -> str:
     i = r.uvarint("robot", len(names))
-    return names[i] if i < len(names) else _read_name(r)
+    return names[i] if i < len(names) else r.name("robot")
 
 
 class Holdings:

@@ -13,6 +13,7 @@ import struct
 import numpy as np
 
 from gmmap.errors import DecodeError
+from gmmap.names import NAME_RE
 
 # --- byte-level fields -----------------------------------------------------------------------
 
@@ -38,6 +39,12 @@ class _Writer:
 
     def raw(self, b: bytes) -> None:
         self.buf += b
+
+    def name(self, name: str) -> None:
+        """A name (`gmmap.names`): its UTF-8 length as a varint, then the bytes."""
+        raw = name.encode()
+        self.uvarint(len(raw))
+        self.raw(raw)
 
 
 class _Reader:
@@ -80,6 +87,16 @@ class _Reader:
         if abs(v) > limit:
             raise DecodeError(f"{what} = {v} exceeds ±{limit}")
         return v
+
+    def name(self, what: str) -> str:
+        """A name of `_Writer.name`; DecodeError where it is not a name."""
+        try:
+            name = self.take(self.uvarint(f"{what} length", 255), what).decode()
+        except UnicodeDecodeError as err:
+            raise DecodeError(f"{what} is not UTF-8") from err
+        if not NAME_RE.fullmatch(name):
+            raise DecodeError(f"{what} {name!r} is not a name")
+        return name
 
     def rest(self) -> bytes:
         out = self.data[self.pos :]
