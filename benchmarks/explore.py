@@ -11,10 +11,13 @@ and ``passage``).
 
 ``sweep`` (``--sweep random-office:103,...``): the team alone on more worlds and sensors
 (``--sweep-sensors``, ``--sweep-budget`` simulated seconds): collisions, coverage, time to
-90 % and each robot's status at the end. ``collisions`` counts every run of both parts.
+90 % and each robot's status at the end. ``aerial`` (``--aerial two-storey``): one aerial
+robot exploring in 3D (`gmmap explore --aerial`), surfaces at every height; there is no
+baseline for it. ``collisions`` counts every run of all parts.
 
     .venv/bin/python benchmarks/explore.py [--worlds random-office:101,...] [--sensors lidar]
         [--sweep random-office:103,...] [--sweep-sensors lidar,depth] [--sweep-budget 150]
+        [--aerial two-storey] [--aerial-budget 300]
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import sys
 from dataclasses import replace
 
 from gmmap.config import Config
+from gmmap.eval.explore.aerial import run_aerial
 from gmmap.eval.explore.team import run_explore
 
 MODES = {"gmm": ("shared", None), "alone": ("shared", 1), "no_sharing": ("no-sharing", None)}
@@ -79,6 +83,16 @@ def sweep(worlds: list[str], sensors: list[str], robots: int, budget: float) -> 
     }
 
 
+def aerial(worlds: list[str], budget: float) -> list[dict]:
+    """One aerial robot per world, in 3D."""
+    out = []
+    for world in worlds:
+        print(f"aerial {world}", file=sys.stderr)
+        r = run_aerial(configured(world, "lidar", 1, budget)).summary()
+        out.append({**r, "budget_s": budget})
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default="random-office:101,random-office:102")
@@ -88,6 +102,8 @@ def main() -> None:
     parser.add_argument("--sweep", default="", help="more worlds, the team alone (collisions)")
     parser.add_argument("--sweep-sensors", default="lidar,depth")
     parser.add_argument("--sweep-budget", type=float, default=150.0, help="simulated seconds")
+    parser.add_argument("--aerial", default="", help="worlds an aerial robot explores in 3D")
+    parser.add_argument("--aerial-budget", type=float, default=300.0, help="simulated seconds")
     args = parser.parse_args()
     cases = [
         case(w, s, args.robots, args.budget)
@@ -98,8 +114,11 @@ def main() -> None:
     if args.sweep:
         sensors = args.sweep_sensors.split(",")
         out["sweep"] = sweep(args.sweep.split(","), sensors, args.robots, args.sweep_budget)
+    if args.aerial:
+        out["aerial"] = aerial(args.aerial.split(","), args.aerial_budget)
     in_cases = sum(r["collisions"] for c in cases for r in c["runs"].values())
-    out["collisions"] = in_cases + out.get("sweep", {}).get("collisions", 0)
+    in_aerial = sum(r["collisions"] for r in out.get("aerial", []))
+    out["collisions"] = in_cases + out.get("sweep", {}).get("collisions", 0) + in_aerial
     print(json.dumps(out, indent=1))
 
 

@@ -25,13 +25,19 @@ BASELINES = {"alone": ("shared", 1), "no_sharing": ("no-sharing", None), "dense"
     "baseline on the same world (each as long as the run itself).",
 )
 @click.option(
+    "--aerial",
+    is_flag=True,
+    help="One aerial robot with a 32-beam ±45° LiDAR explores in 3D (try --world two-storey); "
+    "the baselines are for ground robots and are not run.",
+)
+@click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     help="Folder for result.json, config.yaml, coverage.png and explore.rrd (with Rerun).",
 )
 @config_option
 @as_json_option
-def command(baselines: bool, out: Path | None, config: Config, as_json: bool) -> None:
+def command(baselines: bool, aerial: bool, out: Path | None, config: Config, as_json: bool) -> None:
     """Explore a simulated world with robots that share GMM submaps and free-space horizons.
 
     No route is scripted: each robot chooses frontiers of what the team has seen, routes
@@ -39,21 +45,29 @@ def command(baselines: bool, out: Path | None, config: Config, as_json: bool) ->
     the simulator moves it and checks collisions against the true world. Coverage is measured
     against the true world: its vertical surfaces within 10 cm of the team's map (placed by
     ground truth) and the share of its floor the team knows is free. The run ends when no
-    robot has a frontier left or after explore.time_budget simulated seconds.
+    robot has a frontier left or after explore.time_budget simulated seconds. With
+    --aerial, one flying robot explores in 3D and coverage counts surfaces at every height.
     """
-    explore_and_report(config, baselines, out, as_json)
+    explore_and_report(config, baselines, out, as_json, aerial)
 
 
-def explore_and_report(config: Config, baselines: bool, out: Path | None, as_json: bool) -> None:
+def explore_and_report(
+    config: Config, baselines: bool, out: Path | None, as_json: bool, aerial: bool = False
+) -> None:
     """Runs the exploration (and its baselines), writes ``out`` and prints the report."""
+    from gmmap.eval.explore.aerial import run_aerial
     from gmmap.eval.explore.team import run_explore
 
     o = config.sim
-    log(f"exploring {o.world} with {o.robots} robots ({o.sensor}), sharing GMM submaps")
-    main = run_explore(config, "shared", progress=log)
+    if aerial:
+        log(f"exploring {o.world} in 3D with one aerial robot (32-beam ±45° LiDAR)")
+        main = run_aerial(config, progress=log)
+    else:
+        log(f"exploring {o.world} with {o.robots} robots ({o.sensor}), sharing GMM submaps")
+        main = run_explore(config, "shared", progress=log)
     report = {**main.summary()}
     runs = {"shared": main}
-    if baselines:
+    if baselines and not aerial:
         report["baselines"] = {}
         for name, (mode, robots) in BASELINES.items():
             log(f"baseline {name}: {mode}, {robots or o.robots} robots")

@@ -49,9 +49,9 @@ def save_rerun(
 
 
 def save_paths(paths: list, dt: float, path: str | os.PathLike, curve: list | None = None) -> Path:
-    """Robots' paths ((x, y) per step, world frame) as a Rerun recording on a ``sim_time``
-    timeline: each robot's position and its path so far at every step, and the coverage
-    curve ((t, surface, area) rows) as scalars."""
+    """Robots' paths ((x, y) or (x, y, z) per step, world frame) as a Rerun recording on a
+    ``sim_time`` timeline: each robot's position and its path so far at every step, and the
+    coverage curve ((t, surface, area) rows) as scalars."""
     if not available():
         raise GmmapError("Rerun is not installed: pip install 'gmmap[viz]' (rerun-sdk)")
     import rerun as rr
@@ -62,7 +62,9 @@ def save_paths(paths: list, dt: float, path: str | os.PathLike, curve: list | No
     rec.save(str(path))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for robot, steps in enumerate(paths):
-        xyz = np.c_[np.asarray(steps, float).reshape(-1, 2), np.zeros(len(steps))]
+        xyz = np.asarray(steps, float).reshape(len(steps), -1)
+        if xyz.shape[1] == 2:  # a ground robot's path, on the floor
+            xyz = np.c_[xyz, np.zeros(len(xyz))]
         for k in range(0, len(xyz), 5):
             rec.set_time("sim_time", duration=k * dt)
             rec.log(f"world/robot_{robot}/position", rr.Points3D(xyz[k : k + 1], radii=0.2))

@@ -28,13 +28,17 @@ HEIGHTS = np.arange(0.3, 1.71, STEP)
 WITHIN = 0.1  # metres from the map that count as covered
 
 
-def surface_samples(world: World) -> np.ndarray:
-    """(N, 3) points on the world's visible vertical surfaces (see the module docstring)."""
+def surface_samples(
+    world: World, heights: np.ndarray = HEIGHTS, band: tuple[float, float] | None = (0.3, 1.7)
+) -> np.ndarray:
+    """(N, 3) points on the world's visible vertical surfaces at ``heights`` (see the module
+    docstring); against another shape means within 2 cm of one that occupies ``band`` (None:
+    of any shape, in 3D)."""
     pts = []
     for s in world.shapes:
         if isinstance(s, Box):
             z0, z1 = s.centre[2] - s.size[2] / 2, s.centre[2] + s.size[2] / 2
-            zs = HEIGHTS[(z0 < HEIGHTS) & (z1 > HEIGHTS)]
+            zs = heights[(z0 < heights) & (z1 > heights)]
             c, sn = math.cos(s.yaw), math.sin(s.yaw)
             hx, hy = s.size[0] / 2, s.size[1] / 2
             for ax, half, other in ((0, hx, hy), (1, hy, hx)):
@@ -48,7 +52,7 @@ def surface_samples(world: World) -> np.ndarray:
                     xy += s.centre[:2]
                     pts += [np.c_[xy, np.full(len(xy), z)] for z in zs]
         elif isinstance(s, Cylinder):
-            zs = HEIGHTS[(s.z_min < HEIGHTS) & (s.z_max > HEIGHTS)]
+            zs = heights[(s.z_min < heights) & (s.z_max > heights)]
             n = max(6, int(2 * math.pi * s.radius / STEP))
             a = np.linspace(0, 2 * math.pi, n, endpoint=False)
             xy = np.c_[s.x + (s.radius + 0.03) * np.cos(a), s.y + (s.radius + 0.03) * np.sin(a)]
@@ -58,8 +62,8 @@ def surface_samples(world: World) -> np.ndarray:
     inside = ((p[:, :2] > lo[:2] + 0.05) & (p[:, :2] < hi[:2] - 0.05)).all(axis=1)
     p = p[inside]
     # Each sample sits 3 cm off its face: one closer than 2 cm to a shape is against another.
-    free = world.clearance(p[:, :2], (0.3, 1.7)) > 0.02
-    return p[free]
+    gap = world.distance(p) if band is None else world.clearance(p[:, :2], band)
+    return p[gap > 0.02]
 
 
 def floor_samples(
@@ -120,3 +124,30 @@ class Coverage:
         """The share of ``floor`` that ``known_free`` ((N, 2) world points → bool) says is
         free: the team's horizons, or the dense baseline's grid."""
         return float(known_free(self.floor).mean()) if len(self.floor) else 0.0
+
+
+def volume_samples(world: World, start: np.ndarray, clearance: float, cell: float = 0.3):
+    """(N, 3) points of the space an aerial robot fits in (``clearance`` from every shape)
+    and can reach from ``start``, every ``cell`` m."""
+    lo, hi = world.bounds()
+    axes = [np.arange(a + cell / 2, b, cell) for a, b in zip(lo, hi, strict=True)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+    fits = (world.distance(grid.reshape(-1, 3)) > clearance).reshape(grid.shape[:3])
+    labels, _ = ndimage.label(fits)
+    at = np.floor((np.asarray(start) - lo) / cell).astype(int)
+    return grid[labels == labels[tuple(at)]] if labels[tuple(at)] else np.zeros((0, 3))
+
+
+class AerialCoverage(Coverage):
+    """`Coverage` for an aerial robot: the vertical surfaces at every height (10 cm steps from
+    0.3 m to 0.3 m under the top), those within 45 cm of the space it can reach; ``area``
+    becomes the share of that space known free."""
+
+    def __init__(self, world: World, start: np.ndarray, clearance: float) -> None:
+        top = world.bounds()[1][2]
+        self.floor = volume_samples(world, start, clearance)
+        samples = surface_samples(world, np.arange(0.3, top - 0.29, STEP), band=None)
+        near = cKDTree(self.floor).query(samples, distance_upper_bound=0.45 + 0.3)[0]
+        self.samples = samples[np.isfinite(near)]
+        self.covered = np.zeros(len(self.samples), dtype=bool)
+        self._tree = cKDTree(self.samples)

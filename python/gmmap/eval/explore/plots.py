@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt
 
 
 def plot_coverage(runs: dict, path: str | Path) -> Path:
-    """Surface coverage (solid) and floor area known free (dashed) over simulated time, one
-    colour per run; the legend gives each run's bytes sent."""
+    """Surface coverage (solid) and the floor (or, flying, the space) known free (dashed) over
+    simulated time, one colour per run; the legend gives each run's bytes sent."""
     fig, ax = plt.subplots(figsize=(7, 4))
     for i, (name, r) in enumerate(runs.items()):
         if not r.curve:
@@ -23,7 +23,7 @@ def plot_coverage(runs: dict, path: str | Path) -> Path:
         ax.plot(t, area, color=f"C{i}", linestyle="--", alpha=0.6)
     ax.axhline(0.9, color="grey", linewidth=0.5)
     ax.set(xlabel="simulated time (s)", ylabel="coverage", ylim=(0, 1))
-    ax.set_title(f"{next(iter(runs.values())).world}: surface (solid), floor known free (dashed)")
+    ax.set_title(f"{next(iter(runs.values())).world}: surface (solid), known free (dashed)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     path = Path(path)

@@ -119,6 +119,27 @@ class World:
             best = np.minimum(best, d)
         return best
 
+    def distance(self, xyz: object) -> np.ndarray:
+        """Signed 3D distance from (N, 3) points to the nearest shape (negative inside one):
+        the true geometry an aerial robot must keep clear of."""
+        pts = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        best = np.full(len(pts), np.inf)
+        for s in self.shapes:
+            if isinstance(s, Box):
+                c, sn = math.cos(s.yaw), math.sin(s.yaw)
+                p = pts - np.array(s.centre)
+                local = np.stack(
+                    [c * p[:, 0] + sn * p[:, 1], -sn * p[:, 0] + c * p[:, 1], p[:, 2]], 1
+                )
+                q = np.abs(local) - 0.5 * np.array(s.size)
+            else:
+                radial = np.linalg.norm(pts[:, :2] - [s.x, s.y], axis=1) - s.radius
+                middle, half = 0.5 * (s.z_min + s.z_max), 0.5 * (s.z_max - s.z_min)
+                q = np.stack([radial, np.abs(pts[:, 2] - middle) - half], 1)
+            d = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+            best = np.minimum(best, d)
+        return best
+
     def to_dict(self) -> dict:
         shapes = [
             {"type": "box", "centre": list(s.centre), "size": list(s.size), "yaw": s.yaw}
@@ -193,8 +214,10 @@ def wall(
     y1: float,
     doors: tuple[tuple[float, float], ...] = (),
     height: float = WALL_HEIGHT,
+    base: float = 0.0,
 ) -> list[Box]:
-    """A straight wall from (x0, y0) to (x1, y1) with door gaps (centre along wall, width)."""
+    """A straight wall from (x0, y0) to (x1, y1) with door gaps (centre along wall, width),
+    standing on ``base`` (an upper storey's floor)."""
     length = math.hypot(x1 - x0, y1 - y0)
     if length <= 0:
         raise InvalidInputError("a wall needs two distinct end points")
@@ -206,7 +229,7 @@ def wall(
             mid = 0.5 * (pos + a)
             pieces.append(
                 Box(
-                    (x0 + math.cos(yaw) * mid, y0 + math.sin(yaw) * mid, height / 2),
+                    (x0 + math.cos(yaw) * mid, y0 + math.sin(yaw) * mid, base + height / 2),
                     (a - pos, WALL_THICKNESS, height),
                     yaw,
                 )

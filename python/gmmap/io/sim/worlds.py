@@ -1,5 +1,6 @@
-"""Built-in worlds: ``office`` (the demo's world) and the four planner scenes of the paper's
-Table II: ``corner``, ``passage``, ``clutter`` and ``front-obstacle``."""
+"""Built-in worlds: ``office`` (the demo's world), the four planner scenes of the paper's
+Table II (``corner``, ``passage``, ``clutter`` and ``front-obstacle``) and ``two-storey``, for
+an aerial robot."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.io.sim.world import (
     WALL_HEIGHT,
     Box,
+    Cylinder,
     Shape,
     World,
     cabinet,
@@ -126,12 +128,54 @@ def front_obstacle() -> World:
     return World("front-obstacle", s, [route], (0.6, 0.0, 0.0), (9.4, 0.0))
 
 
+STOREY = 3.0  # metres from one floor to the next in ``two-storey``
+
+
+def _raised(shapes: list[Shape], dz: float) -> list[Shape]:
+    """Furniture moved up onto an upper storey's floor."""
+    return [
+        Box((s.centre[0], s.centre[1], s.centre[2] + dz), s.size, s.yaw)
+        if isinstance(s, Box)
+        else Cylinder(s.x, s.y, s.radius, s.z_min + dz, s.z_max + dz)
+        for s in shapes
+    ]
+
+
+def two_storey() -> World:
+    """A 12 m x 8 m building of two 3 m storeys for an aerial robot: three rooms and a hall on
+    the ground floor, three rooms and a gallery upstairs, joined only by a 3 m x 2.5 m void in
+    the floor between them (x 8.5-11.5, y 5-7.5). The robot starts in the ground-floor hall."""
+    top, base = 2 * STOREY, STOREY + 0.05
+    s: list[Shape] = [slab(0, 0, 12, 8, -0.025), slab(0, 0, 12, 8, top + 0.025)]
+    for a, b in [((0, 0), (12, 0)), ((12, 0), (12, 8)), ((12, 8), (0, 8)), ((0, 8), (0, 0))]:
+        s += wall(*a, *b, height=top)
+    # The floor between the storeys, around the void.
+    for x0, y0, x1, y1 in [(0, 0, 12, 5), (0, 7.5, 12, 8), (0, 5, 8.5, 7.5), (11.5, 5, 12, 7.5)]:
+        s.append(slab(x0, y0, x1, y1, STOREY, thickness=0.1))
+    # Ground floor: rooms A, B, C south of the hall (y 4-8).
+    low = STOREY - 0.05
+    s += wall(0, 4, 12, 4, doors=((2.2, 1.0), (6.3, 1.0), (10.4, 1.0)), height=low)
+    s += wall(4.5, 0, 4.5, 4, height=low) + wall(8.5, 0, 8.5, 4, doors=((1.2, 0.9),), height=low)
+    s += table(2.2, 1.6) + shelf(0.3, 2.4, yaw=math.pi / 2) + cabinet(7.8, 0.5)
+    s += table(10.5, 1.8, w=1.2, yaw=0.4) + pillar(3.0, 6.2, 0.2, low) + cabinet(6.0, 7.6)
+    # Upper storey: rooms D, E, F south of a gallery round the void, a study north-west.
+    s += wall(0, 4, 12, 4, doors=((1.6, 1.0), (7.2, 1.0), (10.8, 1.0)), height=low, base=base)
+    s += wall(3.5, 0, 3.5, 4, height=low, base=base)
+    s += wall(8.0, 0, 8.0, 4, doors=((2.8, 0.9),), height=low, base=base)
+    s += wall(5.0, 4, 5.0, 8, doors=((2.0, 1.0),), height=low, base=base)
+    up = table(1.8, 1.8, yaw=math.pi / 2) + shelf(5.7, 0.3, w=1.6) + cabinet(11.4, 3.4)
+    up += table(2.5, 6.5, w=1.2) + pillar(7.0, 6.8, 0.2, low) + cabinet(9.8, 0.5)
+    s += _raised(up, base)
+    return World("two-storey", s, start=(2.5, 5.5, 0.0))
+
+
 WORLDS = {
     "office": office,
     "corner": corner,
     "passage": passage,
     "clutter": clutter,
     "front-obstacle": front_obstacle,
+    "two-storey": two_storey,
 }
 
 

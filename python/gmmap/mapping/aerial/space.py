@@ -1,0 +1,194 @@
+"""Free space in 3D from what crosses the wire: spherical horizons beside the GMM submaps.
+
+The 3D form of `gmmap.mapping.frontier`'s horizons, for an aerial robot: from a viewpoint on
+the robot's path, how far the sensor saw free space in each of ``AZIMUTHS x ELEVATIONS``
+directions (10° cells over the whole sphere): the nearest return in the cell, or a range the
+sensor vouches for where its beams crossed the cell and returned nothing (a LiDAR's minimum
+range: nothing returned may be something too near); 0 where no beam crossed it (a 360°
+LiDAR's ±45° leaves the poles unseen). One byte per cell (10 cm steps) and 6 for the viewpoint
+(cm, int16), deflated: most cells of a ±45° sensor are unseen and cost almost nothing.
+
+Known free space is the union of the horizons' star-shaped volumes and the ball of ``BODY``
+about each viewpoint (the robot flew there). Frontiers are found on a transient lattice over
+that space (`frontier_points`): known-free points beside a point that is neither known free
+nor near a surface of the team's mixtures. The lattice is the explorer's scratch work, never
+sent.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gmmap.errors import FileFormatError, InvalidInputError
+from gmmap.mapping.frame import Frame
+
+AZIMUTHS, ELEVATIONS = 36, 18  # 10° cells
+RANGE_STEP = 0.1  # metres per range unit on the wire
+MAX_CODE = 255
+BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot flew there
+BLIND = 2.5  # metres within which an unswept direction's space counts as blind, not unknown
+
+
+@dataclass
+class SphereHorizon:
+    """Free range (m) per direction cell from ``origin`` (x, y, z), NaN where not seen; cell
+    (e, a) spans elevations [-90 + 10 e, -80 + 10 e)° and azimuths [10 a, 10 a + 10)°."""
+
+    origin: np.ndarray
+    ranges: np.ndarray  # (ELEVATIONS, AZIMUTHS)
+
+    def moved(self, T: np.ndarray) -> SphereHorizon:
+        """This horizon in another frame: ``T`` (4x4, levelled: a rotation about z). Rotating by
+        whole cells keeps the ranges exact; the rest (< 5°) is the error accepted."""
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        shift = round(yaw / (2 * math.pi / AZIMUTHS))
+        return SphereHorizon(T[:3, :3] @ self.origin + T[:3, 3], np.roll(self.ranges, shift, 1))
+
+
+def cells(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(elevation cell, azimuth cell, length) of (N, 3) offsets."""
+    r = np.linalg.norm(d, axis=1)
+    el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1, 1))
+    e = np.clip(((el + math.pi / 2) / math.pi * ELEVATIONS).astype(int), 0, ELEVATIONS - 1)
+    az = np.arctan2(d[:, 1], d[:, 0])
+    a = np.floor(az / (2 * math.pi) * AZIMUTHS).astype(int) % AZIMUTHS
+    return e, a, r
+
+
+def sphere_horizon(
+    points: np.ndarray, origin: np.ndarray, swept: np.ndarray, reach: float
+) -> SphereHorizon:
+    """The horizon of one scan's (N, 3) points (map frame) from ``origin``: ``swept`` says which
+    cells the sensor's beams cross, free to ``reach`` where they met nothing."""
+    ranges = np.where(swept, min(reach, MAX_CODE * RANGE_STEP), np.nan)
+    if len(points):
+        e, a, r = cells(np.asarray(points, float) - origin)
+        near = np.full(swept.shape, np.inf)
+        np.minimum.at(near, (e, a), r)
+        hit = np.isfinite(near)
+        ranges[hit] = near[hit]
+    return SphereHorizon(np.asarray(origin, float).copy(), ranges)
+
+
+def swept_cells(fov_down: float, fov_up: float) -> np.ndarray:
+    """The cells a spinning LiDAR's beams cross whole, between those elevations (degrees): a
+    cell half outside the field would claim free space past the floor its lowest beam met."""
+    low = np.arange(ELEVATIONS) * 180 / ELEVATIONS - 90
+    rows = (low >= fov_down - 1e-9) & (low + 180 / ELEVATIONS <= fov_up + 1e-9)
+    return np.repeat(rows[:, None], AZIMUTHS, axis=1)
+
+
+class SphereRecorder:
+    """The horizons of a robot's path since its last submap, in its map frame: one per
+    ``spacing`` metres flown, from the first scan there."""
+
+    def __init__(self, swept: np.ndarray, reach: float, spacing: float) -> None:
+        self.swept, self.reach, self.spacing = swept, reach, spacing
+        self.closed: list[SphereHorizon] = []
+        self._last: np.ndarray | None = None
+
+    def add(self, frame: Frame) -> None:
+        origin = frame.pose[:3, 3]
+        if self._last is None or np.linalg.norm(origin - self._last) >= self.spacing:
+            self.closed.append(sphere_horizon(frame.world_points(), origin, self.swept, self.reach))
+            self._last = origin.copy()
+
+    def again(self) -> None:
+        """The next scan makes a horizon wherever it is (a goal reached: what is past it?)."""
+        self._last = None
+
+    def take(self, anchor: np.ndarray) -> list[SphereHorizon]:
+        """The horizons so far in ``anchor``'s frame; the next submap starts afresh."""
+        inverse = np.linalg.inv(anchor)
+        out = [h.moved(inverse) for h in self.closed]
+        self.closed = []
+        return out
+
+
+def encode_spheres(horizons: Sequence[SphereHorizon]) -> bytes:
+    """Wire form: count, then per horizon int16 cm x, y, z and uint8 codes; deflated."""
+    raw = bytearray(struct.pack("<H", len(horizons)))
+    for h in horizons:
+        if h.ranges.shape != (ELEVATIONS, AZIMUTHS):
+            raise InvalidInputError(f"a sphere horizon has {ELEVATIONS}x{AZIMUTHS} cells")
+        xyz = np.clip(np.round(h.origin * 100), -32768, 32767).astype("<i2")
+        codes = np.where(
+            np.isnan(h.ranges),
+            0,
+            np.clip(np.floor(np.nan_to_num(h.ranges) / RANGE_STEP), 1, MAX_CODE),
+        )
+        raw += xyz.tobytes() + codes.astype(np.uint8).tobytes()
+    return zlib.compress(bytes(raw), 9)
+
+
+def decode_spheres(data: bytes) -> list[SphereHorizon]:
+    """The horizons of `encode_spheres`; FileFormatError on anything else."""
+    try:
+        raw = zlib.decompress(data)
+        (n,) = struct.unpack_from("<H", raw)
+    except (zlib.error, struct.error) as exc:
+        raise FileFormatError(f"not a sphere-horizon block: {exc}") from exc
+    size = 6 + ELEVATIONS * AZIMUTHS
+    if len(raw) != 2 + n * size:
+        raise FileFormatError(f"sphere-horizon block of {len(raw)} bytes, expected {2 + n * size}")
+    out = []
+    for i in range(n):
+        at = 2 + i * size
+        origin = np.frombuffer(raw, "<i2", 3, at).astype(float) / 100
+        codes = np.frombuffer(raw, np.uint8, size - 6, at + 6).reshape(ELEVATIONS, AZIMUTHS)
+        out.append(SphereHorizon(origin, np.where(codes == 0, np.nan, codes * RANGE_STEP)))
+    return out
+
+
+class SphereSpace:
+    """The union of spherical horizons: what is known free in 3D."""
+
+    def __init__(self, horizons: Sequence[SphereHorizon]) -> None:
+        self.horizons = list(horizons)
+        self.origins = np.array([h.origin for h in self.horizons]).reshape(-1, 3)
+        self.ranges = np.array([h.ranges for h in self.horizons]).reshape(-1, ELEVATIONS, AZIMUTHS)
+
+    def __len__(self) -> int:
+        return len(self.horizons)
+
+    def inside(self, points: np.ndarray, shrink: float = 0.0, body: bool = True) -> np.ndarray:
+        """(N, H) whether each point is inside each horizon: nearer than its cell's free range
+        less ``shrink`` (or within ``BODY`` of the viewpoint, unless ``body`` is False)."""
+        pts = np.atleast_2d(np.asarray(points, float))
+        out = np.zeros((len(pts), len(self)), dtype=bool)
+        for j, origin in enumerate(self.origins):
+            e, a, r = cells(pts - origin)
+            free = self.ranges[j][e, a] - shrink
+            out[:, j] = np.nan_to_num(free, nan=-1.0) > r
+            if body:
+                out[:, j] |= r < BODY
+        return out
+
+    def blind(self, points: np.ndarray) -> np.ndarray:
+        """Whether each (N, 3) point lies within ``BLIND`` of a viewpoint in a direction its
+        sensor never sweeps (under and over a ±45° LiDAR): space that moving on will show,
+        not a frontier to fly to."""
+        pts = np.atleast_2d(np.asarray(points, float))
+        out = np.zeros(len(pts), dtype=bool)
+        for j in np.unique(np.concatenate(cKDTree(self.origins).query_ball_point(pts, BLIND))):
+            e, a, r = cells(pts - self.origins[int(j)])
+            out |= np.isnan(self.ranges[int(j)][e, a]) & (r < BLIND)
+        return out
+
+    def contains(self, points: np.ndarray, shrink: float = 0.0, body: bool = True) -> np.ndarray:
+        """Whether each (N, 3) point is known free."""
+        return self.inside(points, shrink, body).any(axis=1)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Corners of a box holding every horizon's known free space."""
+        reach = np.nan_to_num(self.ranges, nan=BODY).max(axis=(1, 2))
+        return (self.origins - reach[:, None]).min(axis=0), (self.origins + reach[:, None]).max(
+            axis=0
+        )
