@@ -103,7 +103,9 @@ DESCRIPTIONS: dict[str, str] = {
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
     "without sharing, and frontier exploration on a 5 cm grid from shared point clouds (given "
-    "the frames between robots).",
+    "the frames between robots). `aerial`: one aerial robot exploring in 3D (`gmmap explore "
+    "--aerial`, a 32-beam ±45° LiDAR; coverage of the surfaces at every height, `area` the "
+    "share of the reachable space known free), with no baseline.",
 }
 ORDER = tuple(DESCRIPTIONS)
 MAX_LIST = 25  # longer lists of scalars are shortened in the page (the JSON has them all)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from gmmap.cli import main
 from gmmap.config import Config
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.eval.explore.aerial import run_aerial
@@ -83,7 +86,7 @@ def test_sphere_horizons_round_trip_and_refuse_garbage():
 
 def test_a_yawed_horizon_turns_with_its_frame():
     ranges = np.full((ELEVATIONS, AZIMUTHS), 1.0)
-    ranges[9, 0] = 5.0  # level, towards +x
+    ranges[8:11, 0] = 5.0  # level, towards +x
     T = np.eye(4)
     T[:2, :2] = [[0, -1], [1, 0]]  # 90° about z
     moved = SphereSpace([SphereHorizon(np.zeros(3), ranges).moved(T)])
@@ -122,14 +125,17 @@ def test_the_3d_planner_flies_round_a_wall_to_a_goal_behind_it():
 
 
 def test_an_aerial_robot_flies_up_through_a_void_and_covers_both_storeys(tmp_path):
-    path = tmp_path / "tower.json"
+    path, out = tmp_path / "tower.json", tmp_path / "out"
     _tower().save(path)
-    r = run_aerial(_config(str(path), 120.0))
-    z = np.array(r.paths[0])[:, 2]
-    assert z.max() > 2.6 and z.min() < 2.4  # both storeys
-    assert r.coverage >= 0.9 and r.collisions == 0
-    assert r.statuses == ["done: no frontier left that it can reach"]
-    assert r.bytes_per_robot[0] > 0
+    args = ["explore", "--aerial", "--world", str(path), "--time-budget", "120", "--json"]
+    result = CliRunner().invoke(main, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["coverage"] >= 0.9 and report["collisions"] == 0 and report["robots"] == 1
+    assert report["statuses"] == ["done: no frontier left that it can reach"]
+    assert report["bytes_per_robot"][0] > 0 and "baselines" not in report
+    z = np.array(json.loads((out / "result.json").read_text())["runs"]["aerial"]["paths"][0])
+    assert z[:, 2].max() > 2.6 and z[:, 2].min() < 2.4  # both storeys
 
 
 def test_a_sealed_storey_is_never_reached_and_coverage_is_against_the_true_world(tmp_path):
@@ -157,3 +163,11 @@ def test_the_two_storey_world_joins_its_storeys_only_through_the_void():
     assert len(upper) and (space[:, 2] < 2.8).any()
     through = space[(space[:, 2] > 2.9) & (space[:, 2] < 3.1)]
     assert ((through[:, 0] > 8.5) & (through[:, 0] < 11.5) & (through[:, 1] > 5)).all()
+
+
+def test_the_half_of_a_cell_next_to_a_nearer_one_claims_no_farther_than_it():
+    ranges = np.full((ELEVATIONS, AZIMUTHS), np.nan)
+    ranges[9], ranges[10] = 9.0, 3.0  # 0-10° free to 9 m; 10-20°: a ceiling at 3 m
+    space = SphereSpace([SphereHorizon(np.zeros(3), ranges)])
+    at = [5 * np.array([math.cos(math.radians(d)), 0, math.sin(math.radians(d))]) for d in (2, 8)]
+    assert space.contains(at).tolist() == [True, False]

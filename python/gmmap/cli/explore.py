@@ -66,7 +66,7 @@ def explore_and_report(
         log(f"exploring {o.world} with {o.robots} robots ({o.sensor}), sharing GMM submaps")
         main = run_explore(config, "shared", progress=log)
     report = {**main.summary()}
-    runs = {"shared": main}
+    runs = {"aerial" if aerial else "shared": main}
     if baselines and not aerial:
         report["baselines"] = {}
         for name, (mode, robots) in BASELINES.items():
@@ -97,6 +97,6 @@ def _write(out: Path, config: Config, report: dict, runs: dict) -> None:
     (out / "result.json").write_text(json.dumps({**report, "runs": full}))
     plot_coverage(runs, out / "coverage.png")
     if viz.available():
-        main = runs["shared"]
+        main = next(iter(runs.values()))  # the robots sharing GMMs; the baselines follow
         viz.save_paths(main.paths, 1.0 / config.sim.rate, out / "explore.rrd", main.curve)
     log(f"wrote {out}")

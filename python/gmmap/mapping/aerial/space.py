@@ -54,12 +54,20 @@ class SphereHorizon:
 
 def cells(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(elevation cell, azimuth cell, length) of (N, 3) offsets."""
+    e, _, a, r = _cells(d)
+    return e, a, r
+
+
+def _cells(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`cells`, and the elevation cell nearest each offset's but its own."""
     r = np.linalg.norm(d, axis=1)
     el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1, 1))
-    e = np.clip(((el + math.pi / 2) / math.pi * ELEVATIONS).astype(int), 0, ELEVATIONS - 1)
+    at = (el + math.pi / 2) / math.pi * ELEVATIONS
+    e = np.clip(at.astype(int), 0, ELEVATIONS - 1)
+    beside = np.clip(np.where(at - e >= 0.5, e + 1, e - 1), 0, ELEVATIONS - 1)
     az = np.arctan2(d[:, 1], d[:, 0])
     a = np.floor(az / (2 * math.pi) * AZIMUTHS).astype(int) % AZIMUTHS
-    return e, a, r
+    return e, beside, a, r
 
 
 def sphere_horizon(
@@ -164,8 +172,12 @@ class SphereSpace:
         pts = np.atleast_2d(np.asarray(points, float))
         out = np.zeros((len(pts), len(self)), dtype=bool)
         for j, origin in enumerate(self.origins):
-            e, a, r = cells(pts - origin)
-            free = self.ranges[j][e, a] - shrink
+            e, beside, a, r = _cells(pts - origin)
+            # A cell's beams sample a few elevations in it (every 2.9° for 32 beams over
+            # ±45°): past its top beam a ceiling may be nearer than any beam met. So the half
+            # of a cell next to another claims no farther than that one either.
+            own = self.ranges[j][e, a]
+            free = np.where(np.isnan(own), np.nan, np.fmin(own, self.ranges[j][beside, a])) - shrink
             out[:, j] = np.nan_to_num(free, nan=-1.0) > r
             if body:
                 out[:, j] |= r < BODY
