@@ -144,7 +144,8 @@ def _raised(shapes: list[Shape], dz: float) -> list[Shape]:
 def two_storey() -> World:
     """A 12 m x 8 m building of two 3 m storeys for an aerial robot: three rooms and a hall on
     the ground floor, three rooms and a gallery upstairs, joined only by a 3 m x 2.5 m void in
-    the floor between them (x 8.5-11.5, y 5-7.5). The robot starts in the ground-floor hall."""
+    the floor between them (x 8.5-11.5, y 5-7.5). Robots start in the ground-floor hall; its
+    route, for a ground robot, crosses the hall under the void."""
     top, base = 2 * STOREY, STOREY + 0.05
     s: list[Shape] = [slab(0, 0, 12, 8, -0.025), slab(0, 0, 12, 8, top + 0.025)]
     for a, b in [((0, 0), (12, 0)), ((12, 0), (12, 8)), ((12, 8), (0, 8)), ((0, 8), (0, 0))]:
@@ -166,7 +167,8 @@ def two_storey() -> World:
     up = table(1.8, 1.8, yaw=math.pi / 2) + shelf(5.7, 0.3, w=1.6) + cabinet(11.4, 3.4)
     up += table(2.5, 6.5, w=1.2) + pillar(7.0, 6.8, 0.2, low) + cabinet(9.8, 0.5)
     s += _raised(up, base)
-    return World("two-storey", s, start=(2.5, 5.5, 0.0))
+    route = [(1.0, 5.2), (8.0, 5.2), (8.0, 6.8), (11.0, 6.8)]  # a ground robot's, in the hall
+    return World("two-storey", s, [route], start=(2.5, 5.5, 0.0), goal=(11.0, 6.8))
 
 
 WORLDS = {

@@ -23,7 +23,6 @@ seen since the last-but-one submap.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -232,12 +231,8 @@ class AerialExplorer:
         # Frontier points where the robot stands, having looked again, it cannot see past.
         self.failed += list(points[np.linalg.norm(points - self.position, axis=1) < ARRIVED])
         if self.failed and len(points):
-            gap = cKDTree(np.array(self.failed)).query(points)[0]
-            points, labels, inside = (
-                points[gap > GIVE_UP],
-                labels[gap > GIVE_UP],
-                inside[gap > GIVE_UP],
-            )
+            keep = cKDTree(np.array(self.failed)).query(points)[0] > GIVE_UP
+            points, labels, inside = points[keep], labels[keep], inside[keep]
         if not len(points):
             self.route, self.status = None, "done: no frontier left that it can reach"
             return
@@ -246,14 +241,13 @@ class AerialExplorer:
         legs = np.where(inside, legs + dist[None, : len(space)], np.inf)
         through = np.argmin(legs, axis=1)
         cost = legs[np.arange(len(points)), through]
-        sizes = np.bincount(labels)[labels]
-        big = sizes >= self.options.min_frontier
-        pick = np.where(big, cost, np.inf) if big.any() else cost
-        best = int(np.argmin(pick))
-        if not math.isfinite(pick[best]):
+        reachable = np.isfinite(cost)
+        if not reachable.any():
             self.route = None
             self.status = f"stopped: {len(points)} frontier points, none reachable"
             return
+        big = reachable & (np.bincount(labels)[labels] >= self.options.min_frontier)
+        best = int(np.argmin(np.where(big if big.any() else reachable, cost, np.inf)))
         goal = points[best]
         r = self.route
         if r is not None and np.linalg.norm(goal - r.goal) < GIVE_UP:
@@ -293,6 +287,3 @@ class AerialExplorer:
             self.failed.append(r.goal)
             self.route = None
         return direction
-
-
-__all__ = ["ARRIVED", "AerialExplorer", "SphereSubmap"]
