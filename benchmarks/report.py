@@ -98,7 +98,7 @@ DESCRIPTIONS: dict[str, str] = {
     "grid of the same scans (`astar_over_gmm`: how many GMM steps one A* plan costs).",
     "explore": "Simulated robots exploring procedural offices never used while the explorer "
     "was written (`gmmap explore`, 16-beam LiDAR on two worlds and the depth camera on one, "
-    "3 robots, 300 simulated seconds at most; `sweep`: the team alone on three more worlds "
+    "3 robots, 300 simulated seconds at most; `sweep`: the team alone on five more worlds "
     "with both sensors, 150 s): "
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
