@@ -65,10 +65,13 @@ def robot(name: str, config, report, roscore, *extra) -> subprocess.Popen:
     )  # fmt: skip
 
 
-def play(bag: Path, env: dict) -> None:
+def play(bag: Path, env: dict, wait: bool = False) -> None:
     """``rosbag play``, a second after advertising for the node's subscribers to connect to
-    every topic: an image that came before its CameraInfo connection was up is dropped."""
-    subprocess.run(["rosbag", "play", "-q", "-d", "1", str(bag)], env=env, check=True, timeout=60)
+    every topic; with ``wait``, only once every topic has a subscriber connected: an image
+    that came before its CameraInfo connection was up is dropped (a second was not always
+    enough on a loaded CI machine)."""
+    args = ["rosbag", "play", "-q", "-d", "1", *(["--wait-for-subscribers"] if wait else [])]
+    subprocess.run([*args, str(bag)], env=env, check=True, timeout=60)
 
 
 def subscribed(topics) -> bool:
@@ -185,7 +188,7 @@ def test_the_ros1_node_maps_depth_images_posed_by_a_tf_chain(tmp_path, roscore):
     sub = rospy.Subscriber("/gmmap/status", String, lambda m: heard.__setitem__("s", m.data))
     try:
         assert wait(lambda: subscribed(["/camera/depth/image", "/tf_static"]), 30)
-        play(bag, roscore)
+        play(bag, roscore, wait=True)
         mapped = lambda: "s" in heard and json.loads(heard["s"])["live"]["mapped"] == 8  # noqa: E731
         assert wait(mapped, 60), heard.get("s")
     finally:

@@ -8,7 +8,8 @@ left out: a sensor looks along them, and they would measure its field of view, n
 Samples inside or against another shape, or outside the world's bounds (the outer faces of
 its walls), cannot be seen and are not counted, nor are surfaces farther than 45 cm from the
 floor the robots can reach. ``area``: the share of that floor (a 25 cm grid, 20 cm from any
-shape, connected to where the robots start) that the team knows is free.
+shape, connected to where the robots start) that the team knows is free. An aerial robot's
+(`AerialCoverage`) counts the surfaces at every height, and the space it can fly in.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from gmmap.errors import InvalidInputError
 from gmmap.io.sim import Box, Cylinder, World
 from gmmap.math.gmm import Gmm
 
@@ -90,9 +92,12 @@ class Coverage:
         self.floor = floor_samples(world, starts)
         samples = surface_samples(world)
         near = cKDTree(self.floor).query(samples[:, :2], distance_upper_bound=0.45)[0]
-        self.samples = samples[np.isfinite(near)]
-        self.covered = np.zeros(len(self.samples), dtype=bool)
-        self._tree = cKDTree(self.samples)
+        self._keep(samples[np.isfinite(near)])
+
+    def _keep(self, samples: np.ndarray) -> None:
+        self.samples = samples
+        self.covered = np.zeros(len(samples), dtype=bool)
+        self._tree = cKDTree(samples)
 
     def add_gmm(self, gmm: Gmm) -> None:
         """Marks the samples within 10 cm of a mixture's surfaces (world frame): inside some
@@ -134,20 +139,21 @@ def volume_samples(world: World, start: np.ndarray, clearance: float, cell: floa
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
     fits = (world.distance(grid.reshape(-1, 3)) > clearance).reshape(grid.shape[:3])
     labels, _ = ndimage.label(fits)
-    at = np.floor((np.asarray(start) - lo) / cell).astype(int)
-    return grid[labels == labels[tuple(at)]] if labels[tuple(at)] else np.zeros((0, 3))
+    at = tuple(np.floor((np.asarray(start) - lo) / cell).astype(int))
+    if not all(0 <= i < n for i, n in zip(at, labels.shape, strict=True)) or not labels[at]:
+        raise InvalidInputError(f"{world.name}: no room for the robot at {start}")
+    return grid[labels == labels[at]]
 
 
 class AerialCoverage(Coverage):
     """`Coverage` for an aerial robot: the vertical surfaces at every height (10 cm steps from
-    0.3 m to 0.3 m under the top), those within 45 cm of the space it can reach; ``area``
-    becomes the share of that space known free."""
+    0.3 m to 0.3 m under the top) within 75 cm of a point of the space it can reach (a 30 cm
+    lattice, its points ``clearance`` from every shape); ``area`` becomes the share of that
+    space known free."""
 
     def __init__(self, world: World, start: np.ndarray, clearance: float) -> None:
         top = world.bounds()[1][2]
         self.floor = volume_samples(world, start, clearance)
         samples = surface_samples(world, np.arange(0.3, top - 0.29, STEP), band=None)
-        near = cKDTree(self.floor).query(samples, distance_upper_bound=0.45 + 0.3)[0]
-        self.samples = samples[np.isfinite(near)]
-        self.covered = np.zeros(len(self.samples), dtype=bool)
-        self._tree = cKDTree(self.samples)
+        near = cKDTree(self.floor).query(samples, distance_upper_bound=0.75)[0]
+        self._keep(samples[np.isfinite(near)])
