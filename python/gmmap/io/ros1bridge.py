@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+import threading
 import time
 from types import SimpleNamespace
 
@@ -75,6 +76,8 @@ class Ros1Bridge(Bridge):
 
         ros.init_node(f"gmmap_{robot}", anonymous=False, disable_signals=True)
         self._ros = ros
+        self._first = threading.Lock()  # guards _camera against _early, the image before it
+        self._early = None
         o = options
         kinds = {ros2msgs.CAMERA_INFO: CameraInfo, ros2msgs.IMAGE: Image,
                  ros2msgs.POINTCLOUD2: PointCloud2, ros2msgs.ODOMETRY: Odometry,
@@ -105,9 +108,19 @@ class Ros1Bridge(Bridge):
         self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, decode_pointcloud2(view))
 
     def _camera_info(self, msg) -> None:
-        self._camera = camera_of(msg, msg.K)
+        with self._first:
+            self._camera = camera_of(msg, msg.K)
+            early, self._early = self._early, None
+        if early is not None:
+            self._depth(early)
 
     def _depth(self, msg) -> None:
+        # rospy delivers each topic on its own connection and thread: a camera's first image
+        # may come before its first CameraInfo. It waits for it (the latest such image only).
+        with self._first:
+            if self._camera is None:
+                self._early = msg
+                return
         points = depth_points(msg, self._intrinsics(), self.options.depth_stride)
         self._frame(msg.header.stamp.to_sec(), msg.header.frame_id, points)
 
