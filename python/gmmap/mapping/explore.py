@@ -36,6 +36,7 @@ from gmmap.mapping.frontier import (
     FreeSpace,
     Horizon,
     HorizonRecorder,
+    clear_lines,
     encode_horizons,
     unit,
 )
@@ -280,18 +281,8 @@ class Explorer:
         pairs = cKDTree(space.origins).query_pairs(self.options.link_radius, output_type="ndarray")
         if not len(pairs):
             return edges
-        ok = self._clear_lines(space, space.origins[pairs[:, 0]], space.origins[pairs[:, 1]])
+        ok = clear_lines(space, space.origins[pairs[:, 0]], space.origins[pairs[:, 1]])
         return edges + [tuple(p) for p in pairs[ok]]
-
-    @staticmethod
-    def _clear_lines(space: FreeSpace, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Whether each segment a→b is inside known free space (a route, not a safe line: the
-        planner keeps the robot off surfaces on the way)."""
-        steps = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0) / 0.2)) + 1)
-        t = np.linspace(0, 1, steps)
-        pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, 2)
-        good = space.contains(pts, shrink=0.1)
-        return good.reshape(len(a), steps).all(axis=1)
 
     # ---- goals ------------------------------------------------------------------------------
 
@@ -339,7 +330,7 @@ class Explorer:
         # Straight there where the line is known free: a corridor's far end was seen from a
         # viewpoint behind the robot, and the route through it would go back first.
         straight = np.linalg.norm(goals - self.position, axis=1)
-        direct = self._clear_lines(space, np.repeat(self.position[None], len(goals), 0), goals)
+        direct = clear_lines(space, np.repeat(self.position[None], len(goals), 0), goals)
         direct &= straight < via
         route_cost = np.where(direct, straight, via)
         costs = [c + self._crowding(f.goal, peers) for c, f in zip(route_cost, fronts, strict=True)]
@@ -386,7 +377,7 @@ class Explorer:
         if len(near):
             # From just off the robot: it stands where it stands, even inside a margin.
             off = self.position + 0.3 * unit(space.origins[near] - self.position)
-            clear = self._clear_lines(space, off, space.origins[near])
+            clear = clear_lines(space, off, space.origins[near])
             edges += [(start, int(i)) for i in near[clear]]
         latest = pending[-1] if pending else k.last_own
         if latest is not None:

@@ -102,13 +102,29 @@ def encode_horizons(horizons: Sequence[Horizon]) -> bytes:
         if len(h.ranges) != bins:
             raise InvalidInputError("every horizon of a submap has the same number of bins")
         x, y = (int(np.clip(round(v * 100), -32768, 32767)) for v in h.origin)
-        codes = np.where(
-            np.isnan(h.ranges),
-            0,
-            np.clip(np.floor(np.nan_to_num(h.ranges) / RANGE_STEP), 1, MAX_CODE),
-        )
-        raw += struct.pack("<hh", x, y) + codes.astype(np.uint8).tobytes()
+        raw += struct.pack("<hh", x, y) + range_codes(h.ranges).tobytes()
     return zlib.compress(bytes(raw), 9)
+
+
+def range_codes(ranges: np.ndarray) -> np.ndarray:
+    """Free ranges (m, NaN: not seen) as the wire's bytes: 0 not seen, k free for k x 10 cm."""
+    codes = np.clip(np.floor(np.nan_to_num(ranges) / RANGE_STEP), 1, MAX_CODE)
+    return np.where(np.isnan(ranges), 0, codes).astype(np.uint8)
+
+
+def code_ranges(codes: np.ndarray) -> np.ndarray:
+    """The free ranges of `range_codes`' bytes."""
+    return np.where(codes == 0, np.nan, codes.astype(float) * RANGE_STEP)
+
+
+def clear_lines(space, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether each segment a→b ((N, 2) or (N, 3) ends) lies inside ``space``'s known free
+    space (anything with ``contains(points, shrink)``): a route, not a safe line (the planner
+    keeps the robot off surfaces on the way)."""
+    steps = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0) / 0.2)) + 1)
+    t = np.linspace(0, 1, steps)
+    pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, a.shape[1])
+    return space.contains(pts, shrink=0.1).reshape(len(a), steps).all(axis=1)
 
 
 def decode_horizons(data: bytes) -> list[Horizon]:
@@ -124,10 +140,8 @@ def decode_horizons(data: bytes) -> list[Horizon]:
     out = []
     for i in range(n):
         x, y = struct.unpack_from("<hh", raw, 4 + i * size)
-        codes = np.frombuffer(raw, np.uint8, bins, 4 + i * size + 4).astype(float)
-        out.append(
-            Horizon(np.array([x, y]) / 100.0, np.where(codes == 0, np.nan, codes * RANGE_STEP))
-        )
+        codes = np.frombuffer(raw, np.uint8, bins, 4 + i * size + 4)
+        out.append(Horizon(np.array([x, y]) / 100.0, code_ranges(codes)))
     return out
 
 

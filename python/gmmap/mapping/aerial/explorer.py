@@ -40,6 +40,7 @@ from gmmap.mapping.aerial.space import (
     encode_spheres,
 )
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.frontier import clear_lines
 from gmmap.mapping.planner import ARRIVED, STUCK_STEPS, Route
 from gmmap.mapping.submap import Submap, SubmapBuilder, concatenate
 from gmmap.math.gmm import Gmm
@@ -197,13 +198,13 @@ class AerialExplorer:
         edges = [(i, i + 1) for i in range(n - 1)]  # one robot: it flew from one to the next
         pairs = cKDTree(space.origins).query_pairs(self.options.link_radius, output_type="ndarray")
         if len(pairs):
-            ok = self._clear(space, space.origins[pairs[:, 0]], space.origins[pairs[:, 1]])
+            ok = clear_lines(space, space.origins[pairs[:, 0]], space.origins[pairs[:, 1]])
             edges += [tuple(p) for p in pairs[ok]]
         near = np.array(
             cKDTree(space.origins).query_ball_point(self.position, self.options.link_radius), int
         )
         if len(near):
-            ok = self._clear(
+            ok = clear_lines(
                 space, np.repeat(self.position[None], len(near), 0), space.origins[near]
             )
             edges += [(n, int(i)) for i in near[ok]]
@@ -214,14 +215,6 @@ class AerialExplorer:
         graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n + 1, n + 1)).tocsr()
         dist, pred = dijkstra(graph, directed=False, indices=n, return_predecessors=True)
         return dist, pred, n
-
-    @staticmethod
-    def _clear(space: SphereSpace, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Whether each segment a→b lies in known free space."""
-        steps = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0) / 0.2)) + 1)
-        t = np.linspace(0, 1, steps)
-        pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, 3)
-        return space.contains(pts, shrink=0.1).reshape(len(a), steps).all(axis=1)
 
     def _choose(self, stamp: float) -> None:
         space = self.space()

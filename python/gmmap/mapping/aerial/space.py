@@ -28,11 +28,9 @@ from scipy.spatial import cKDTree
 
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.frontier import BODY, MAX_CODE, RANGE_STEP, code_ranges, range_codes
 
 AZIMUTHS, ELEVATIONS = 36, 18  # 10° cells
-RANGE_STEP = 0.1  # metres per range unit on the wire
-MAX_CODE = 255
-BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot flew there
 BLIND = 2.5  # metres within which an unswept direction's space counts as blind, not unknown
 
 
@@ -127,12 +125,7 @@ def encode_spheres(horizons: Sequence[SphereHorizon]) -> bytes:
         if h.ranges.shape != (ELEVATIONS, AZIMUTHS):
             raise InvalidInputError(f"a sphere horizon has {ELEVATIONS}x{AZIMUTHS} cells")
         xyz = np.clip(np.round(h.origin * 100), -32768, 32767).astype("<i2")
-        codes = np.where(
-            np.isnan(h.ranges),
-            0,
-            np.clip(np.floor(np.nan_to_num(h.ranges) / RANGE_STEP), 1, MAX_CODE),
-        )
-        raw += xyz.tobytes() + codes.astype(np.uint8).tobytes()
+        raw += xyz.tobytes() + range_codes(h.ranges).tobytes()
     return zlib.compress(bytes(raw), 9)
 
 
@@ -151,7 +144,7 @@ def decode_spheres(data: bytes) -> list[SphereHorizon]:
         at = 2 + i * size
         origin = np.frombuffer(raw, "<i2", 3, at).astype(float) / 100
         codes = np.frombuffer(raw, np.uint8, size - 6, at + 6).reshape(ELEVATIONS, AZIMUTHS)
-        out.append(SphereHorizon(origin, np.where(codes == 0, np.nan, codes * RANGE_STEP)))
+        out.append(SphereHorizon(origin, code_ranges(codes)))
     return out
 
 
