@@ -71,17 +71,54 @@ def test_a_sphere_horizon_sees_free_space_to_the_walls_and_not_past_them():
 def test_sphere_horizons_round_trip_and_refuse_garbage():
     rng = np.random.default_rng(1)
     ranges = np.where(rng.random((ELEVATIONS, AZIMUTHS)) < 0.5, np.nan, rng.uniform(0.1, 20, 1))
-    h = SphereHorizon(np.array([1.234, -5.0, 2.5]), ranges)
+    far = np.where(rng.random(ranges.shape) < 0.9, np.nan, ranges + 3.0)
+    h = SphereHorizon(np.array([1.234, -5.0, 2.5]), ranges, far)
     (back,) = decode_spheres(encode_spheres([h]))
     assert back.origin == pytest.approx(h.origin, abs=0.006)
-    assert np.array_equal(np.isnan(back.ranges), np.isnan(ranges))
-    assert np.nanmax(np.abs(back.ranges - ranges)) <= 0.1 + 1e-9
+    for got, sent in ((back.ranges, ranges), (back.far, far)):
+        assert np.array_equal(np.isnan(got), np.isnan(sent))
+        assert np.nanmax(np.abs(got - sent)) <= 0.1 + 1e-9
     with pytest.raises(FileFormatError):
         decode_spheres(b"not deflated")
     with pytest.raises(FileFormatError):
         decode_spheres(encode_spheres([h])[:-3])
     with pytest.raises(InvalidInputError):
         encode_spheres([SphereHorizon(h.origin, ranges[:3])])
+
+
+def _corridor(door: bool) -> World:
+    """A 2 m x 14 m corridor with a room off its north wall through a 1 m door (or none)."""
+    s = [slab(-1, -3, 15, 8, -0.025), slab(-1, -3, 15, 8, 2.525)]
+    s += wall(0, 0, 14, 0) + wall(0, 0, 0, 2) + wall(14, 0, 14, 2)
+    s += wall(0, 2, 11, 2) + wall(12, 2, 14, 2) if door else wall(0, 2, 14, 2)
+    s += wall(9, 2, 9, 6) + wall(9, 6, 14, 6) + wall(14, 2, 14, 6)
+    return World("door" if door else "no door", s)
+
+
+def test_a_doorway_seen_down_a_corridor_is_glimpsed_and_looked_at_from_the_corridor():
+    from gmmap.io.sim import Lidar
+
+    lidar = Lidar(32, 45.0, -45.0, max_range=20.0, noise_std=0.0)
+    world, horizons = _corridor(door=True), []
+    for x in (1.0, 5.0):
+        pose = np.eye(4)
+        pose[:3, 3] = [x, 1.0, 1.2]
+        pts = lidar.scan(world, pose, np.random.default_rng(0)) + pose[:3, 3]
+        horizons.append(sphere_horizon(pts, pose[:3, 3], swept_cells(-45, 45), 0.3))
+    g = np.stack(np.meshgrid(np.arange(2, 14, 0.2), np.arange(-2.5, 5.8, 0.2), [1.0, 1.4]), -1)
+    g = g.reshape(-1, 3)
+    room, behind = g[g[:, 1] > 2.2], g[(g[:, 1] < -0.3) & (g[:, 0] > 4) & (g[:, 0] < 6)]
+    space = SphereSpace(horizons)
+    assert not space.contains(room).any()  # the 10° cells hold the wall beside the door
+    look, seer = space.glimpsed(room)
+    assert (seer >= 0).sum() > 5 and np.array_equal(seer < 0, np.isnan(look[:, 0]))
+    look = look[seer >= 0]
+    assert space.contains(look).all()
+    assert ((look[:, 1] > 0.0) & (look[:, 1] < 1.9)).all()  # in the corridor, short of the wall
+    # A cell of the far viewpoint grazing the south wall holds space behind it; the nearer
+    # viewpoint abeam of it saw the wall and nothing past.
+    assert (SphereSpace(horizons[:1]).glimpsed(behind)[1] >= 0).any()
+    assert (space.glimpsed(behind)[1] < 0).all()
 
 
 def test_a_yawed_horizon_turns_with_its_frame():

@@ -8,7 +8,9 @@ Choosing a goal: the known free space (the union of the horizons) and the occupa
 submaps' mixtures (`Field3D`) are sampled on a lattice of ``LATTICE`` m over the horizons'
 extent. A frontier point is a known-free point the robot fits at, beside a point that is
 neither known free nor within reach of a surface (behind a wall the field is high: the
-surface's components, grown by the robot, are thicker than the lattice step). Frontier points
+surface's components, grown by the robot, are thicker than the lattice step), or in front of
+the nearest return of a cell whose beams glimpsed such a point past it (a doorway seen down a
+corridor, which EM spans with the wall's components and no cell sees through). Frontier points
 are grouped into connected clusters; the goal is the cheapest point of a cluster of at least
 ``explore.min_frontier`` points (any cluster once none is that large). Its cost is a route
 through the graph of viewpoints (consecutive ones, and any two within ``link_radius`` whose
@@ -158,19 +160,19 @@ class AerialExplorer:
 
     # ---- goals ------------------------------------------------------------------------------
 
-    def _lattice(self, space: SphereSpace) -> tuple[np.ndarray, tuple[int, int, int]]:
+    def _lattice(self, space: SphereSpace) -> tuple[np.ndarray, tuple[int, int, int], float]:
         lo, hi = space.extent()
         step = LATTICE
         while np.prod(np.ceil((hi - lo) / step) + 1) > MAX_LATTICE:
             step *= 1.25
         axes = [np.arange(a, b + step, step) for a, b in zip(lo, hi, strict=True)]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
-        return grid.reshape(-1, 3), grid.shape[:3]
+        return grid.reshape(-1, 3), grid.shape[:3], step
 
     def frontiers(self, space: SphereSpace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Frontier points (M, 3), their cluster labels (M,) and which horizons hold each
         (M, H)."""
-        points, shape = self._lattice(space)
+        points, shape, step = self._lattice(space)
         inside = space.inside(points, shrink=0.05)
         free = inside.any(axis=1)
         occ = np.zeros(len(points))
@@ -187,7 +189,21 @@ class AerialExplorer:
                 edge[axis] = 0 if shift == 1 else -1
                 moved[tuple(edge)] = True  # past the lattice is unknown
                 beside |= moved
-        front = (free & (occ < FIT_LEVEL)).reshape(shape) & beside
+        fits = free & (occ < FIT_LEVEL)
+        front = fits.reshape(shape) & beside
+        # Unknown space some beam glimpsed past a nearer return (a doorway down a corridor):
+        # the known-free point in front of that return is a frontier too, moved towards the
+        # viewpoint along the line it saw while the robot does not fit there.
+        look, seer = space.glimpsed(points[open_.ravel()])
+        look, origin = look[seer >= 0], space.origins[seer[seer >= 0]]
+        for f in (1.0, 0.75, 0.5):
+            at = np.round((origin + f * (look - origin) - points[0]) / step).astype(int)
+            within = ((at >= 0) & (at < shape)).all(axis=1)
+            flat = np.ravel_multi_index(at[within].T, shape)
+            ok = np.zeros(len(look), dtype=bool)
+            ok[within] = fits[flat]
+            np.put(front, flat[ok[within]], True)
+            look, origin = look[~ok], origin[~ok]
         labels, _ = ndimage.label(front, structure=np.ones((3, 3, 3)))
         keep = front.ravel()
         return points[keep], labels.ravel()[keep], inside[keep]

@@ -8,6 +8,12 @@ range: nothing returned may be something too near); 0 where no beam crossed it (
 LiDAR's ±45° leaves the poles unseen). One byte per cell (10 cm steps) and 6 for the viewpoint
 (cm, int16), deflated: most cells of a ±45° sensor are unseen and cost almost nothing.
 
+A cell holds its nearest return, so a doorway seen down a corridor, narrower than a cell,
+vanishes behind the wall beside it. Where some beam of a cell went on at least ``GAP`` m past
+the nearest return, the cell also carries that farthest return: space there was glimpsed, not
+seen free, and a frontier in front of it (`gmmap.mapping.aerial.explorer`) sends the robot to
+look. A second byte per cell, 0 where there is no gap, which deflate makes nearly free.
+
 Known free space is the union of the horizons' star-shaped volumes and the ball of ``BODY``
 about each viewpoint (the robot flew there). Frontiers are found on a transient lattice over
 that space (`frontier_points`): known-free points beside a point that is neither known free
@@ -28,10 +34,11 @@ from scipy.spatial import cKDTree
 
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.mapping.frame import Frame
-from gmmap.mapping.frontier import BODY, MAX_CODE, RANGE_STEP, code_ranges, range_codes
+from gmmap.mapping.frontier import BACK, BODY, MAX_CODE, RANGE_STEP, code_ranges, range_codes
 
 AZIMUTHS, ELEVATIONS = 36, 18  # 10° cells
 BLIND = 2.5  # metres within which an unswept direction's space counts as blind, not unknown
+GAP = 1.0  # metres past a cell's nearest return its farthest must reach to be kept
 
 
 @dataclass
@@ -41,13 +48,19 @@ class SphereHorizon:
 
     origin: np.ndarray
     ranges: np.ndarray  # (ELEVATIONS, AZIMUTHS)
+    far: np.ndarray | None = None  # farthest return where ``GAP`` past the nearest, else NaN
+
+    def __post_init__(self) -> None:
+        if self.far is None:
+            self.far = np.full(self.ranges.shape, np.nan)
 
     def moved(self, T: np.ndarray) -> SphereHorizon:
         """This horizon in another frame: ``T`` (4x4, levelled: a rotation about z). Rotating by
         whole cells keeps the ranges exact; the rest (< 5°) is the error accepted."""
         yaw = math.atan2(T[1, 0], T[0, 0])
         shift = round(yaw / (2 * math.pi / AZIMUTHS))
-        return SphereHorizon(T[:3, :3] @ self.origin + T[:3, 3], np.roll(self.ranges, shift, 1))
+        origin = T[:3, :3] @ self.origin + T[:3, 3]
+        return SphereHorizon(origin, np.roll(self.ranges, shift, 1), np.roll(self.far, shift, 1))
 
 
 def cells(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,13 +87,17 @@ def sphere_horizon(
     """The horizon of one scan's (N, 3) points (map frame) from ``origin``: ``swept`` says which
     cells the sensor's beams cross, free to ``reach`` where they met nothing."""
     ranges = np.where(swept, min(reach, MAX_CODE * RANGE_STEP), np.nan)
+    far = np.full(swept.shape, np.nan)
     if len(points):
         e, a, r = cells(np.asarray(points, float) - origin)
-        near = np.full(swept.shape, np.inf)
+        near, most = np.full(swept.shape, np.inf), np.zeros(swept.shape)
         np.minimum.at(near, (e, a), r)
+        np.maximum.at(most, (e, a), r)
         hit = np.isfinite(near)
         ranges[hit] = near[hit]
-    return SphereHorizon(np.asarray(origin, float).copy(), ranges)
+        gap = hit & (most >= near + GAP)
+        far[gap] = np.minimum(most[gap], MAX_CODE * RANGE_STEP)
+    return SphereHorizon(np.asarray(origin, float).copy(), ranges, far)
 
 
 def swept_cells(fov_down: float, fov_up: float) -> np.ndarray:
@@ -119,13 +136,14 @@ class SphereRecorder:
 
 
 def encode_spheres(horizons: Sequence[SphereHorizon]) -> bytes:
-    """Wire form: count, then per horizon int16 cm x, y, z and uint8 codes; deflated."""
+    """Wire form: count, then per horizon int16 cm x, y, z and uint8 codes of the nearest and
+    of the far returns (0: none); deflated."""
     raw = bytearray(struct.pack("<H", len(horizons)))
     for h in horizons:
-        if h.ranges.shape != (ELEVATIONS, AZIMUTHS):
+        if h.ranges.shape != (ELEVATIONS, AZIMUTHS) or h.far.shape != h.ranges.shape:
             raise InvalidInputError(f"a sphere horizon has {ELEVATIONS}x{AZIMUTHS} cells")
         xyz = np.clip(np.round(h.origin * 100), -32768, 32767).astype("<i2")
-        raw += xyz.tobytes() + range_codes(h.ranges).tobytes()
+        raw += xyz.tobytes() + range_codes(h.ranges).tobytes() + range_codes(h.far).tobytes()
     return zlib.compress(bytes(raw), 9)
 
 
@@ -136,15 +154,16 @@ def decode_spheres(data: bytes) -> list[SphereHorizon]:
         (n,) = struct.unpack_from("<H", raw)
     except (zlib.error, struct.error) as exc:
         raise FileFormatError(f"not a sphere-horizon block: {exc}") from exc
-    size = 6 + ELEVATIONS * AZIMUTHS
+    n_cells = ELEVATIONS * AZIMUTHS
+    size = 6 + 2 * n_cells
     if len(raw) != 2 + n * size:
         raise FileFormatError(f"sphere-horizon block of {len(raw)} bytes, expected {2 + n * size}")
     out = []
     for i in range(n):
         at = 2 + i * size
         origin = np.frombuffer(raw, "<i2", 3, at).astype(float) / 100
-        codes = np.frombuffer(raw, np.uint8, size - 6, at + 6).reshape(ELEVATIONS, AZIMUTHS)
-        out.append(SphereHorizon(origin, code_ranges(codes)))
+        near, far = np.frombuffer(raw, np.uint8, 2 * n_cells, at + 6).reshape(2, ELEVATIONS, -1)
+        out.append(SphereHorizon(origin, code_ranges(near), code_ranges(far)))
     return out
 
 
@@ -155,6 +174,7 @@ class SphereSpace:
         self.horizons = list(horizons)
         self.origins = np.array([h.origin for h in self.horizons]).reshape(-1, 3)
         self.ranges = np.array([h.ranges for h in self.horizons]).reshape(-1, ELEVATIONS, AZIMUTHS)
+        self.far = np.array([h.far for h in self.horizons]).reshape(self.ranges.shape)
 
     def __len__(self) -> int:
         return len(self.horizons)
@@ -186,6 +206,34 @@ class SphereSpace:
             e, a, r = cells(pts - self.origins[int(j)])
             out |= np.isnan(self.ranges[int(j)][e, a]) & (r < BLIND)
         return out
+
+    def glimpsed(self, points: np.ndarray, margin: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3): for each point that some beam saw past, where to look from, and (N,) the
+        viewpoint that saw past; NaN rows and -1 for the other points.
+
+        Glimpsed: between a cell's nearest and farthest returns, ``margin`` m clear of both,
+        unless a nearer viewpoint's cell holding it met a surface in front of it and saw
+        nothing past (a cell grazing a wall also holds space behind the wall). The look-out
+        is ``BACK`` m short of that nearest return, on the line to the point."""
+        pts = np.atleast_2d(np.asarray(points, float))
+        out, by = np.full(pts.shape, np.nan), np.full(len(pts), np.inf)
+        seer = np.full(len(pts), -1)
+        for j in np.flatnonzero(~np.isnan(self.far).all(axis=(1, 2))):
+            todo = np.flatnonzero(np.isnan(out[:, 0]))
+            d = pts[todo] - self.origins[j]
+            e, a, r = cells(d)
+            near, far = self.ranges[j][e, a], self.far[j][e, a]
+            hit = (r > near + margin) & (r < far - margin) & (near > BACK)
+            look = (near[hit] - BACK) / r[hit]
+            out[todo[hit]] = self.origins[j] + look[:, None] * d[hit]
+            by[todo[hit]], seer[todo[hit]] = r[hit], j
+        some = np.flatnonzero(~np.isnan(out[:, 0]))
+        for j in range(len(self)):
+            e, a, r = cells(pts[some] - self.origins[j])
+            near, far = self.ranges[j][e, a], self.far[j][e, a]
+            solid = (near < r - margin) & np.isnan(far) & (r < by[some])
+            out[some[solid]], seer[some[solid]] = np.nan, -1
+        return out, seer
 
     def contains(self, points: np.ndarray, shrink: float = 0.0, body: bool = True) -> np.ndarray:
         """Whether each (N, 3) point is known free."""
