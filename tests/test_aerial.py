@@ -86,20 +86,22 @@ def test_sphere_horizons_round_trip_and_refuse_garbage():
         encode_spheres([SphereHorizon(h.origin, ranges[:3])])
 
 
-def _corridor(door: bool) -> World:
-    """A 2 m x 14 m corridor with a room off its north wall through a 1 m door (or none)."""
+def _corridor(door: float | None) -> World:
+    """A 2 m x 14 m corridor with a 5 m x 4 m room off its north wall through a 1 m door
+    from x = ``door`` (or none, the room sealed, at x = 9)."""
+    x = 9.0 if door is None else door - 2.0
     s = [slab(-1, -3, 15, 8, -0.025), slab(-1, -3, 15, 8, 2.525)]
     s += wall(0, 0, 14, 0) + wall(0, 0, 0, 2) + wall(14, 0, 14, 2)
-    s += wall(0, 2, 11, 2) + wall(12, 2, 14, 2) if door else wall(0, 2, 14, 2)
-    s += wall(9, 2, 9, 6) + wall(9, 6, 14, 6) + wall(14, 2, 14, 6)
-    return World("door" if door else "no door", s)
+    s += wall(0, 2, 14, 2) if door is None else wall(0, 2, door, 2) + wall(door + 1, 2, 14, 2)
+    s += wall(x, 2, x, 6) + wall(x, 6, x + 5, 6) + wall(x + 5, 2, x + 5, 6)
+    return World("corridor", s)
 
 
 def test_a_doorway_seen_down_a_corridor_is_glimpsed_and_looked_at_from_the_corridor():
     from gmmap.io.sim import Lidar
 
     lidar = Lidar(32, 45.0, -45.0, max_range=20.0, noise_std=0.0)
-    world, horizons = _corridor(door=True), []
+    world, horizons = _corridor(11.0), []
     for x in (1.0, 5.0):
         pose = np.eye(4)
         pose[:3, 3] = [x, 1.0, 1.2]
@@ -119,6 +121,32 @@ def test_a_doorway_seen_down_a_corridor_is_glimpsed_and_looked_at_from_the_corri
     # viewpoint abeam of it saw the wall and nothing past.
     assert (SphereSpace(horizons[:1]).glimpsed(behind)[1] >= 0).any()
     assert (space.glimpsed(behind)[1] < 0).all()
+
+
+@pytest.mark.parametrize("door", [7.0, None])
+def test_walls_seen_through_a_doorway_are_looked_at_from_the_corridor(door: float | None):
+    from gmmap.io.sim import Lidar
+    from gmmap.mapping.aerial.explorer import AerialExplorer
+    from gmmap.mapping.frame import Frame
+
+    lidar = Lidar(32, 45.0, -45.0, max_range=20.0, noise_std=0.0)
+    explorer = AerialExplorer("r", swept_cells(-45, 45), 0.3)
+    world = _corridor(door)
+    for k, x in enumerate(np.arange(1.0, 6.0, 0.25)):
+        pose = np.eye(4)
+        pose[:3, 3] = [x, 1.0, 1.2]
+        pts = lidar.scan(world, pose, np.random.default_rng(k))
+        explorer.observe(Frame(float(k), pts, pose, pose))
+    explorer.flush()
+    space = explorer.space()
+    lost, by = explorer.unsighted(space)
+    in_room = lost[:, 1] > 2.1
+    assert in_room.any() == (door is not None)  # seen through the door, or not at all
+    if door is not None:
+        look = space.look_outs(lost[in_room], by[in_room])
+        look = look[~np.isnan(look[:, 0])]
+        assert len(look) and space.contains(look).all()
+        assert ((look[:, 1] > 0.0) & (look[:, 1] < 2.0)).all()  # in the corridor
 
 
 def test_a_yawed_horizon_turns_with_its_frame():

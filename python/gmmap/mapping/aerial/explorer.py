@@ -8,9 +8,10 @@ Choosing a goal: the known free space (the union of the horizons) and the occupa
 submaps' mixtures (`Field3D`) are sampled on a lattice of ``LATTICE`` m over the horizons'
 extent. A frontier point is a known-free point the robot fits at, beside a point that is
 neither known free nor within reach of a surface (behind a wall the field is high: the
-surface's components, grown by the robot, are thicker than the lattice step), or in front of
+surface's components, grown by the robot, are thicker than the lattice step); or in front of
 the nearest return of a cell whose beams glimpsed such a point past it (a doorway seen down a
-corridor, which EM spans with the wall's components and no cell sees through). Frontier points
+corridor, which EM spans with the wall's components and no cell sees through); or on the line
+to a component seen with no known free space in front of it (through such a gap). Frontier points
 are grouped into connected clusters; the goal is the cheapest point of a cluster of at least
 ``explore.min_frontier`` points (any cluster once none is that large). Its cost is a route
 through the graph of viewpoints (consecutive ones, and any two within ``link_radius`` whose
@@ -191,11 +192,16 @@ class AerialExplorer:
                 beside |= moved
         fits = free & (occ < FIT_LEVEL)
         front = fits.reshape(shape) & beside
-        # Unknown space some beam glimpsed past a nearer return (a doorway down a corridor):
+        # Unknown space some beam glimpsed past a nearer return (a doorway down a corridor),
+        # and surfaces seen with no known free space in front of them (through such a gap):
         # the known-free point in front of that return is a frontier too, moved towards the
         # viewpoint along the line it saw while the robot does not fit there.
         look, seer = space.glimpsed(points[open_.ravel()])
         look, origin = look[seer >= 0], space.origins[seer[seer >= 0]]
+        lost, by = self.unsighted(space)
+        more = space.look_outs(lost, by)
+        ok = ~np.isnan(more[:, 0])
+        look, origin = np.vstack([look, more[ok]]), np.vstack([origin, space.origins[by[ok]]])
         for f in (1.0, 0.75, 0.5):
             at = np.round((origin + f * (look - origin) - points[0]) / step).astype(int)
             within = ((at >= 0) & (at < shape)).all(axis=1)
@@ -207,6 +213,26 @@ class AerialExplorer:
         labels, _ = ndimage.label(front, structure=np.ones((3, 3, 3)))
         keep = front.ravel()
         return points[keep], labels.ravel()[keep], inside[keep]
+
+    def unsighted(self, space: SphereSpace) -> tuple[np.ndarray, np.ndarray]:
+        """The means (M, 3) of the submaps' components with no known free space half a metre
+        in front of them (seen through a gap), and (M,) the viewpoints they were seen from:
+        each one's nearest of its own submap's."""
+        means, owners, first = [np.zeros((0, 3))], [np.zeros(0, int)], 0
+        for s in self.submaps:
+            n = len(s.horizons)
+            if n:
+                m = s.submap.gmm.means @ s.submap.anchor[:3, :3].T + s.submap.anchor[:3, 3]
+                d = np.linalg.norm(m[:, None] - space.origins[None, first : first + n], axis=2)
+                means.append(m)
+                owners.append(first + np.argmin(d, axis=1))
+            first += n
+        m, owner = np.vstack(means), np.concatenate(owners)
+        v = space.origins[owner]
+        away = np.linalg.norm(v - m, axis=1)
+        front = m + 0.5 * (v - m) / np.maximum(away, 1e-9)[:, None]
+        lost = (away > 1.0) & ~space.contains(front)
+        return m[lost], owner[lost]
 
     def _distances(self, space: SphereSpace) -> tuple[np.ndarray, np.ndarray, int]:
         """Route lengths from the robot (the last node) to every viewpoint."""

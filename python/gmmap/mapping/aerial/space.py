@@ -216,24 +216,34 @@ class SphereSpace:
         nothing past (a cell grazing a wall also holds space behind the wall). The look-out
         is ``BACK`` m short of that nearest return, on the line to the point."""
         pts = np.atleast_2d(np.asarray(points, float))
-        out, by = np.full(pts.shape, np.nan), np.full(len(pts), np.inf)
-        seer = np.full(len(pts), -1)
+        seer, by = np.full(len(pts), -1), np.full(len(pts), np.inf)
         for j in np.flatnonzero(~np.isnan(self.far).all(axis=(1, 2))):
-            todo = np.flatnonzero(np.isnan(out[:, 0]))
-            d = pts[todo] - self.origins[j]
-            e, a, r = cells(d)
+            todo = np.flatnonzero(seer < 0)
+            e, a, r = cells(pts[todo] - self.origins[j])
             near, far = self.ranges[j][e, a], self.far[j][e, a]
-            hit = (r > near + margin) & (r < far - margin) & (near > BACK)
-            look = (near[hit] - BACK) / r[hit]
-            out[todo[hit]] = self.origins[j] + look[:, None] * d[hit]
+            hit = (r > near + margin) & (r < far - margin)
             by[todo[hit]], seer[todo[hit]] = r[hit], j
-        some = np.flatnonzero(~np.isnan(out[:, 0]))
+        some = np.flatnonzero(seer >= 0)
         for j in range(len(self)):
             e, a, r = cells(pts[some] - self.origins[j])
             near, far = self.ranges[j][e, a], self.far[j][e, a]
-            solid = (near < r - margin) & np.isnan(far) & (r < by[some])
-            out[some[solid]], seer[some[solid]] = np.nan, -1
+            seer[some[(near < r - margin) & np.isnan(far) & (r < by[some])]] = -1
+        out = np.full(pts.shape, np.nan)
+        out[seer >= 0] = self.look_outs(pts[seer >= 0], seer[seer >= 0])
+        seer[np.isnan(out[:, 0])] = -1
         return out, seer
+
+    def look_outs(self, points: np.ndarray, owners: np.ndarray) -> np.ndarray:
+        """(N, 3): on the line from viewpoint ``owners[i]`` to each point, ``BACK`` m short of
+        where that viewpoint's known free space along it ends (or of the point); NaN where
+        that is within ``BACK`` of the viewpoint."""
+        d = np.atleast_2d(points) - self.origins[owners]
+        e, beside, a, r = _cells(d)
+        own = self.ranges[owners, e, a]
+        free = np.where(np.isnan(own), np.nan, np.fmin(own, self.ranges[owners, beside, a]))
+        reach = np.minimum(free, r) - BACK  # NaN where the viewpoint never saw that way
+        reach[~(reach > BACK)] = np.nan
+        return self.origins[owners] + (reach / np.maximum(r, 1e-9))[:, None] * d
 
     def contains(self, points: np.ndarray, shrink: float = 0.0, body: bool = True) -> np.ndarray:
         """Whether each (N, 3) point is known free."""
