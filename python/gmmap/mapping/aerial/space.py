@@ -186,15 +186,21 @@ class SphereSpace:
         out = np.zeros((len(pts), len(self)), dtype=bool)
         for j, origin in enumerate(self.origins):
             e, beside, a, r = _cells(pts - origin)
-            # A cell's beams sample a few elevations in it (every 2.9° for 32 beams over
-            # ±45°): past its top beam a ceiling may be nearer than any beam met. So the half
-            # of a cell next to another claims no farther than that one either.
-            own = self.ranges[j][e, a]
-            free = np.where(np.isnan(own), np.nan, np.fmin(own, self.ranges[j][beside, a])) - shrink
+            free = self._free(j, e, beside, a) - shrink
             out[:, j] = np.nan_to_num(free, nan=-1.0) > r
             if body:
                 out[:, j] |= r < BODY
         return out
+
+    def _free(
+        self, j: int | np.ndarray, e: np.ndarray, beside: np.ndarray, a: np.ndarray
+    ) -> np.ndarray:
+        """Free range of horizon(s) ``j`` in cells (e, a) of `_cells`, NaN where unseen."""
+        # A cell's beams sample a few elevations in it (every 2.9° for 32 beams over ±45°):
+        # past its top beam a ceiling may be nearer than any beam met. So the half of a cell
+        # next to another claims no farther than that one either.
+        own = self.ranges[j, e, a]
+        return np.where(np.isnan(own), np.nan, np.fmin(own, self.ranges[j, beside, a]))
 
     def blind(self, points: np.ndarray) -> np.ndarray:
         """Whether each (N, 3) point lies within ``BLIND`` of a viewpoint in a direction its
@@ -239,9 +245,7 @@ class SphereSpace:
         that is within ``BACK`` of the viewpoint."""
         d = np.atleast_2d(points) - self.origins[owners]
         e, beside, a, r = _cells(d)
-        own = self.ranges[owners, e, a]
-        free = np.where(np.isnan(own), np.nan, np.fmin(own, self.ranges[owners, beside, a]))
-        reach = np.minimum(free, r) - BACK  # NaN where the viewpoint never saw that way
+        reach = np.minimum(self._free(owners, e, beside, a), r) - BACK  # NaN: never seen
         reach[~(reach > BACK)] = np.nan
         return self.origins[owners] + (reach / np.maximum(r, 1e-9))[:, None] * d
 
