@@ -13,9 +13,10 @@ from gmmap.cli import main
 from gmmap.config import Config
 from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.eval.explore.aerial import run_aerial
-from gmmap.io.sim import Box, World
+from gmmap.io.sim import Box, Lidar, World
 from gmmap.io.sim.world import slab, wall
 from gmmap.io.sim.worlds import two_storey
+from gmmap.mapping.aerial.explorer import AerialExplorer
 from gmmap.mapping.aerial.field import Field3D, Steering
 from gmmap.mapping.aerial.space import (
     AZIMUTHS,
@@ -27,6 +28,7 @@ from gmmap.mapping.aerial.space import (
     sphere_horizon,
     swept_cells,
 )
+from gmmap.mapping.frame import Frame
 from gmmap.math.gmm import Gmm
 from gmmap.options import PlannerOptions
 
@@ -54,8 +56,6 @@ def test_the_world_distance_is_signed_in_3d():
 
 def test_a_sphere_horizon_sees_free_space_to_the_walls_and_not_past_them():
     w = World("room", [*wall(-2, -2, 2, -2), *wall(2, -2, 2, 2), slab(-2, -2, 2, 2, -0.025)])
-    from gmmap.io.sim import Lidar
-
     lidar = Lidar(32, 45.0, -45.0, max_range=10.0, noise_std=0.0)
     pose = np.eye(4)
     pose[2, 3] = 1.0
@@ -98,8 +98,6 @@ def _corridor(door: float | None) -> World:
 
 
 def test_a_doorway_seen_down_a_corridor_is_glimpsed_and_looked_at_from_the_corridor():
-    from gmmap.io.sim import Lidar
-
     lidar = Lidar(32, 45.0, -45.0, max_range=20.0, noise_std=0.0)
     world, horizons = _corridor(11.0), []
     for x in (1.0, 5.0):
@@ -125,10 +123,6 @@ def test_a_doorway_seen_down_a_corridor_is_glimpsed_and_looked_at_from_the_corri
 
 @pytest.mark.parametrize("door", [7.0, None])
 def test_walls_seen_through_a_doorway_are_looked_at_from_the_corridor(door: float | None):
-    from gmmap.io.sim import Lidar
-    from gmmap.mapping.aerial.explorer import AerialExplorer
-    from gmmap.mapping.frame import Frame
-
     lidar = Lidar(32, 45.0, -45.0, max_range=20.0, noise_std=0.0)
     explorer = AerialExplorer("r", swept_cells(-45, 45), 0.3)
     world = _corridor(door)
