@@ -196,12 +196,13 @@ class AerialExplorer:
         # and surfaces seen with no known free space in front of them (through such a gap):
         # the known-free point in front of that return is a frontier too, moved towards the
         # viewpoint along the line it saw while the robot does not fit there.
-        look, seer = space.glimpsed(points[open_.ravel()])
-        look, origin = look[seer >= 0], space.origins[seer[seer >= 0]]
+        unknown = points[open_.ravel()]
+        seer = space.glimpsed(unknown)
         lost, by = self.unsighted(space)
-        more = space.look_outs(lost, by)
-        ok = ~np.isnan(more[:, 0])
-        look, origin = np.vstack([look, more[ok]]), np.vstack([origin, space.origins[by[ok]]])
+        owners = np.concatenate([seer[seer >= 0], by])
+        look = space.look_outs(np.vstack([unknown[seer >= 0], lost]), owners)
+        seen = ~np.isnan(look[:, 0])
+        look, origin = look[seen], space.origins[owners[seen]]
         for f in (1.0, 0.75, 0.5):
             at = np.round((origin + f * (look - origin) - points[0]) / step).astype(int)
             within = ((at >= 0) & (at < shape)).all(axis=1)

@@ -213,14 +213,13 @@ class SphereSpace:
             out |= np.isnan(self.ranges[int(j)][e, a]) & (r < BLIND)
         return out
 
-    def glimpsed(self, points: np.ndarray, margin: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
-        """(N, 3): for each point that some beam saw past, where to look from, and (N,) the
-        viewpoint that saw past; NaN rows and -1 for the other points.
+    def glimpsed(self, points: np.ndarray, margin: float = 0.3) -> np.ndarray:
+        """(N,): for each point, the viewpoint some beam of which saw past it, -1 if none.
 
         Glimpsed: between a cell's nearest and farthest returns, ``margin`` m clear of both,
         unless a nearer viewpoint's cell holding it met a surface in front of it and saw
-        nothing past (a cell grazing a wall also holds space behind the wall). The look-out
-        is ``BACK`` m short of that nearest return, on the line to the point."""
+        nothing past (a cell grazing a wall also holds space behind the wall). Where to look
+        from: `look_outs`."""
         pts = np.atleast_2d(np.asarray(points, float))
         seer, by = np.full(len(pts), -1), np.full(len(pts), np.inf)
         for j in np.flatnonzero(~np.isnan(self.far).all(axis=(1, 2))):
@@ -234,10 +233,7 @@ class SphereSpace:
             e, a, r = cells(pts[some] - self.origins[j])
             near, far = self.ranges[j][e, a], self.far[j][e, a]
             seer[some[(near < r - margin) & np.isnan(far) & (r < by[some])]] = -1
-        out = np.full(pts.shape, np.nan)
-        out[seer >= 0] = self.look_outs(pts[seer >= 0], seer[seer >= 0])
-        seer[np.isnan(out[:, 0])] = -1
-        return out, seer
+        return seer
 
     def look_outs(self, points: np.ndarray, owners: np.ndarray) -> np.ndarray:
         """(N, 3): on the line from viewpoint ``owners[i]`` to each point, ``BACK`` m short of
