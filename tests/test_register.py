@@ -203,3 +203,29 @@ def test_repeats_pool_pairs_built_with_other_seeds():
     assert twice["methods"]["points"] != once["methods"]["points"]
     with pytest.raises(InvalidInputError, match="repeats"):
         evaluate_registration(frames, 2, ("points",), repeats=0)
+
+
+def test_shifted_starts_find_a_part_far_from_the_whole_centroid(scene):
+    """A piece of a scene, its centroid a metre from the whole's: starts shifted by that much
+    find it, and refining more distinct coarse solutions never returns a worse one (it refines
+    a superset of them)."""
+    from gmmap.eval.registration import pose_errors
+
+    part = scene.means[:, 0] > np.quantile(scene.means[:, 0], 0.6)
+    piece = Gmm(scene.weights[part] / scene.weights[part].sum(), scene.means[part],
+                scene.covariances[part])  # fmt: skip
+    truth = rigid(2.0, [0.3, -0.2, 0.0])
+    source = piece.transform(np.linalg.inv(truth))
+    offset = np.linalg.norm((piece.weights @ piece.means - scene.weights @ scene.means)[:2])
+    r = register(source, scene, start_offset=offset, refine_starts=4)
+    t, deg = pose_errors(r.transform, truth)
+    assert t < 0.01 and deg < 0.5
+    previous = 0.0
+    for k in (1, 2, 3, 5):
+        c = register(source, scene, start_offset=offset, refine_starts=k).confidence
+        assert c >= previous - 1e-9
+        previous = c
+    with pytest.raises(InvalidInputError):
+        register(source, scene, refine_starts=0)
+    with pytest.raises(InvalidInputError):
+        register(source, scene, start_offset=-1.0)

@@ -142,6 +142,16 @@ class RegisterOptions:
     ``information_scale`` None: the smaller component count (each component one independent
     measurement). ``confidence_scale``: the widening under which C is measured, so that it
     reflects shared geometry rather than how sharply each side was fitted.
+
+    ``start_offset`` and ``refine_starts`` widen the global search (off by default). On the
+    simulated office (3 robots, seeds 0-2, `gmmap eval merge` defaults otherwise), 1.5 m and 4
+    raise verified precision from 0.90-0.94 to 0.95-1.0 on the 16-beam LiDAR and from
+    0.64-0.83 to 0.84-0.85 on the 10 Hz 360° LiDAR (more corridor flips meet their right
+    twin as the alternative), and no-guess registration of overlapping 10 Hz pairs from 125 to
+    154 of 352 right, at 3-4 times the time. They stay off: on the 2 Hz 360° LiDAR, seed 0,
+    one robot pair no longer joins with 4 (it holds 2 consistent matches, not
+    ``BackendOptions.min_matches``), and with 3 one pair joins 5.1° off; the depth camera
+    joins nothing either way.
     """
 
     #: From a guess: std devs (m) added to every covariance, coarse to fine
@@ -153,6 +163,8 @@ class RegisterOptions:
     # many times the scale (`gmmap.math.register`); 0: the whole mixtures at every scale.
     coarse_cell: float = 2.0  #: From a guess, coarse scales merge mixtures in cells of this × scale
     yaw_starts: int = 12  #: Rotations about +z a global search starts from
+    start_offset: float = 0.0  #: Global search: also start each yaw shifted this far on ±x, ±y (m)
+    refine_starts: int = 2  #: Global search: distinct coarse solutions refined to the finest scale
     dof: int = 6  #: Degrees of freedom: 6, or 4 (x, y, z and yaw only: ground robots)
     information_scale: float | None = None  #: Measurements counted; null: smaller component count
     confidence_scale: float = 0.05  #: σ (m) added to every covariance to measure the confidence C
@@ -170,8 +182,10 @@ class RegisterOptions:
             raise InvalidInputError("coarse_cell must be finite and >= 0")
         if not (math.isfinite(self.confidence_scale) and self.confidence_scale >= 0):
             raise InvalidInputError("confidence_scale must be finite and >= 0")
-        if self.max_iter < 1 or self.yaw_starts < 1 or not self.cutoff > 0 or not self.tol > 0:
-            raise InvalidInputError("max_iter, yaw_starts >= 1; cutoff, tol > 0")
+        if self.max_iter < 1 or min(self.yaw_starts, self.refine_starts) < 1:
+            raise InvalidInputError("max_iter, yaw_starts and refine_starts must be >= 1")
+        if not (self.cutoff > 0 and self.tol > 0 and 0 <= self.start_offset < math.inf):
+            raise InvalidInputError("cutoff, tol > 0 and a finite start_offset >= 0")
         if self.information_scale is not None and not self.information_scale > 0:
             raise InvalidInputError("information_scale must be > 0 (or null)")
 

@@ -10,8 +10,9 @@
 //! gradients (H alone where that is not positive), accepted only when F grows.
 //! Coarse to fine: an isotropic variance s² is added to every covariance of both mixtures, for
 //! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
-//! `yaw_starts` rotations about +z (gravity) with the centroids aligned are tried at the coarsest
-//! scale, the best two distinct ones are refined, and the one with the higher C is returned (the
+//! `yaw_starts` rotations about +z (gravity), each with the centroids aligned and shifted by
+//! `start_offset` along ±x and ±y, are tried at the coarsest scale; the best `refine_starts`
+//! distinct ones are refined and the one with the highest C is returned (the best distinct
 //! other's C is the `alternative`). C at the end (measured with `confidence_scale` added to all
 //! covariances) is the geometric confidence; H (scaled) is the information matrix.
 
@@ -38,6 +39,12 @@ pub struct RegisterOptions {
     pub four_dof: bool,
     /// Yaw starts tried when there is no initial guess.
     pub yaw_starts: usize,
+    /// Without a guess, each yaw also starts with the centroids this far apart along ±x and
+    /// ±y of the target (units of the means); 0: centroids aligned only.
+    pub start_offset: f64,
+    /// Without a guess, the distinct coarse solutions refined (the best is returned, the
+    /// next best's confidence is the `alternative`).
+    pub refine_starts: usize,
     /// Pairs farther apart than this many standard deviations are skipped.
     pub cutoff: f64,
     /// Multiplies the Gauss-Newton metric to give the information matrix.
@@ -60,6 +67,8 @@ impl Default for RegisterOptions {
             tol: 1e-5,
             four_dof: false,
             yaw_starts: 12,
+            start_offset: 0.0,
+            refine_starts: 2,
             cutoff: 4.0,
             information_scale: 1.0,
             confidence_scale: 0.05,
@@ -615,23 +624,43 @@ pub fn register(
                     .collect(),
             };
             let (ms, mt) = (weighted_mean(source), weighted_mean(target));
-            let mut found: Vec<(f64, Pose)> = Vec::new();
-            for yaw in yaws {
-                let mut pose = Pose::yaw(yaw);
-                let rm = mat_vec(&pose.r, &ms);
-                pose.t = [mt[0] - rm[0], mt[1] - rm[1], mt[2] - rm[2]];
-                let (p, e, it) = problem.optimise(pose, coarse, opts);
-                iterations += it;
-                found.push((e.f, p));
+            let o = opts.start_offset;
+            let mut shifts = vec![[0.0, 0.0]];
+            if o > 0.0 {
+                shifts.extend([[o, 0.0], [-o, 0.0], [0.0, o], [0.0, -o]]);
             }
+            let poses: Vec<Pose> = yaws
+                .iter()
+                .flat_map(|&yaw| {
+                    shifts.iter().map(move |s| {
+                        let mut pose = Pose::yaw(yaw);
+                        let rm = mat_vec(&pose.r, &ms);
+                        pose.t = [mt[0] - rm[0] + s[0], mt[1] - rm[1] + s[1], mt[2] - rm[2]];
+                        pose
+                    })
+                })
+                .collect();
+            let mut found: Vec<(f64, Pose, usize)> = poses
+                .par_iter()
+                .map(|&start| {
+                    let (p, e, it) = problem.optimise(start, coarse, opts);
+                    (e.f, p, it)
+                })
+                .collect();
+            iterations += found.iter().map(|x| x.2).sum::<usize>();
             found.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let best = found[0].1;
-            let runner = found.iter().map(|x| x.1).find(|p| distinct(p, &best));
-            std::iter::once(best).chain(runner).collect()
+            let mut picked: Vec<Pose> = Vec::new();
+            for (_, p, _) in &found {
+                if picked.len() == opts.refine_starts.max(1) {
+                    break;
+                }
+                if picked.iter().all(|q| distinct(p, q)) {
+                    picked.push(*p);
+                }
+            }
+            picked
         }
     };
-    let (mut pose, mut fin, it) = problem.refine(starts[0], scales, opts);
-    iterations += it;
     let c2 = opts.confidence_scale * opts.confidence_scale;
     // ∫f², ∫g² and ∫T(f)g, all widened by c2 and pruned alike (evaluate adds c2 to each side).
     let self_overlap = |g: &Gmm| {
@@ -641,20 +670,26 @@ pub fn register(
     };
     let norm = (self_overlap(source) * self_overlap(target)).sqrt();
     let confidence_at = |p: &Pose| (problem.evaluate(p, c2, false).f / norm).clamp(0.0, 1.0);
-    let mut confidence = confidence_at(&pose);
-    let mut alternative = 0.0;
-    if let Some(start) = starts.get(1) {
-        let (other, other_fin, it) = problem.refine(*start, scales, opts);
+    // The coarse scale only ranks the starts; the finer scales can reverse the order.
+    let mut refined: Vec<(f64, Pose, Eval)> = Vec::with_capacity(starts.len());
+    for start in &starts {
+        let (p, fin, it) = problem.refine(*start, scales, opts);
         iterations += it;
-        if distinct(&other, &pose) {
-            alternative = confidence_at(&other);
-            // The coarse scale only ranks the starts; the finer scales can reverse the order.
-            if alternative > confidence {
-                (pose, fin) = (other, other_fin);
-                std::mem::swap(&mut confidence, &mut alternative);
-            }
+        refined.push((confidence_at(&p), p, fin));
+    }
+    // A later basin replaces the one held only where it is distinct and scores higher: two
+    // starts that refine into one basin keep the first's pose.
+    let (mut confidence, mut pose, mut fin) = refined[0];
+    for r in &refined[1..] {
+        if distinct(&r.1, &pose) && r.0 > confidence {
+            (confidence, pose, fin) = *r;
         }
     }
+    let alternative = refined
+        .iter()
+        .filter(|r| distinct(&r.1, &pose))
+        .map(|r| r.0)
+        .fold(0.0, f64::max);
     let mut h = fin.h;
     symmetrise(&mut h);
     let scale = if fin.f > 0.0 {

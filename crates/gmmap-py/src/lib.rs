@@ -271,7 +271,7 @@ type RegisterOutput<'py> = (
 /// the best distinct solution's confidence).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, information_scale, confidence_scale, tol, cutoff, coarse_cell, coarse_scale))]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, start_offset, refine_starts, information_scale, confidence_scale, tol, cutoff, coarse_cell, coarse_scale))]
 fn register_gmm<'py>(
     py: Python<'py>,
     source: (
@@ -290,6 +290,8 @@ fn register_gmm<'py>(
     max_iter: usize,
     four_dof: bool,
     yaw_starts: usize,
+    start_offset: f64,
+    refine_starts: usize,
     information_scale: f64,
     confidence_scale: f64,
     tol: f64,
@@ -309,6 +311,8 @@ fn register_gmm<'py>(
         max_iter,
         four_dof,
         yaw_starts,
+        start_offset,
+        refine_starts,
         information_scale,
         confidence_scale,
         tol,

@@ -12,7 +12,10 @@ C at the solution, measured with ``confidence_scale`` (5 cm) added to every cova
 reflects the shared geometry rather than how sharply each side was fitted, is the geometric
 confidence (1: the mixtures coincide; nearly independent of the component counts). Without
 ``init`` the search starts from ``yaw_starts`` rotations about +z (robots share gravity, not
-heading) with the centroids aligned, or near ``yaw_hint``.
+heading) with the centroids aligned, or near ``yaw_hint``; ``start_offset`` adds starts with
+the centroids that far apart along ±x and ±y, and the best ``refine_starts`` distinct coarse
+solutions are refined (the best is returned, the next best distinct one's C is the
+``alternative_confidence``).
 """
 
 from __future__ import annotations
@@ -100,6 +103,8 @@ def register(
         int(o.max_iter),
         o.dof == 4,
         int(o.yaw_starts),
+        float(o.start_offset),
+        int(o.refine_starts),
         scale,
         float(o.confidence_scale),
         float(o.tol),
