@@ -326,6 +326,11 @@ SCOREBOARD: tuple[Row, ...] = (
         "TUM fr1_xyz, two sessions (the second at 10 Hz)",
         real=True,
     ),
+    _sensors(
+        ("real", "tum_fr3_cabinet_halves"),
+        "TUM fr3 cabinet, two halves of its loop",
+        real=True,
+    ),
 )
 
 
