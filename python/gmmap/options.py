@@ -147,11 +147,11 @@ class RegisterOptions:
     simulated office (3 robots, seeds 0-2, `gmmap eval merge` defaults otherwise), 1.5 m and 4
     raise verified precision from 0.90-0.94 to 0.95-1.0 on the 16-beam LiDAR and from
     0.64-0.83 to 0.84-0.85 on the 10 Hz 360° LiDAR (more corridor flips meet their right
-    twin as the alternative), and no-guess registration of overlapping 10 Hz pairs from 125 to
-    154 of 352 right, at 3-4 times the time. They stay off: on the 2 Hz 360° LiDAR, seed 0,
-    one robot pair no longer joins with 4 (it holds 2 consistent matches, not
-    ``BackendOptions.min_matches``), and with 3 one pair joins 5.1° off; the depth camera
-    joins nothing either way.
+    twin as the alternative), and no-guess registration of overlapping pairs from 125 to 154
+    of 352 right (10 Hz, seed 2) and 40 to 60 of 120 (16-beam, seed 0), at 3-4 times the
+    time. They stay off: on the 2 Hz 360° LiDAR, seed 0, one robot pair no longer joins with 4
+    (it holds 2 consistent matches, not ``BackendOptions.min_matches``), and with 3 one pair
+    joins 5.1° off; the depth camera joins nothing either way.
     """
 
     #: From a guess: std devs (m) added to every covariance, coarse to fine
