@@ -18,9 +18,11 @@ from gmmap.eval.explore.team import run_explore
 from gmmap.io.sim import World
 from gmmap.io.sim.world import slab, wall
 from gmmap.mapping.explore import Explorer
+from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import (
     FreeSpace,
     Horizon,
+    HorizonRecorder,
     decode_horizons,
     encode_horizons,
     horizon_from,
@@ -89,6 +91,28 @@ def test_horizons_round_trip_the_wire_and_garbage_is_a_typed_error():
     for bad in (b"", b"not a horizon", data[:-3]):
         with pytest.raises(FileFormatError):
             decode_horizons(bad)
+
+
+def _frame(at, points) -> Frame:
+    pose = np.eye(4)
+    pose[:2, 3] = at
+    return Frame(0.0, np.asarray(points, dtype=np.float32) - [*at, 0.0], pose)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known flaw (docs/guide/explore.md): a horizon bins every frame within "
+    "explore.horizon_spacing as if seen from its viewpoint",
+)
+def test_a_view_from_elsewhere_does_not_free_a_jamb_beside_the_viewpoint():
+    """A horizon's viewpoint north of a wall whose end (a door jamb) lies 0.5 m south of it;
+    the next view, 0.94 m away through the door, sees far south. The line from the viewpoint
+    to what that view saw crosses the jamb, which nobody saw: it must stay unknown (traced: a
+    depth robot's collision on random-office:109)."""
+    recorder = HorizonRecorder(72, 1.0, (0.05, 1.2))
+    recorder.add(_frame([0.3, 0.5], [[0.3, 3.0, 0.5]]))
+    recorder.add(_frame([-0.1, -0.35], [[0.3, -3.0, 0.5]]))
+    assert not FreeSpace(recorder.all()).contains([[0.3, 0.0]], body=False)[0]
 
 
 def test_free_space_is_inside_some_horizon_and_frontiers_lie_beside_it():
