@@ -12,8 +12,9 @@
 //! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
 //! `yaw_starts` rotations about +z (gravity), each with the centroids aligned and shifted by
 //! `start_offset` along ±x and ±y, are tried at the coarsest scale; the best `refine_starts`
-//! distinct ones are refined and the one with the highest C is returned (the best distinct
-//! other's C is the `alternative`). C at the end (measured with `confidence_scale` added to all
+//! distinct ones are refined and the basin with the highest C is returned (a start refined
+//! into a basin already held does not replace it; the best distinct other's C is the
+//! `alternative`). C at the end (measured with `confidence_scale` added to all
 //! covariances) is the geometric confidence; H (scaled) is the information matrix.
 
 use crate::fastmath::exp_nonpos;

@@ -239,11 +239,12 @@ class SphereSpace:
         """(N, 3): on the line from viewpoint ``owners[i]`` to each point, ``BACK`` m short of
         where that viewpoint's known free space along it ends (or of the point); NaN where
         that is within ``BACK`` of the viewpoint."""
-        d = np.atleast_2d(points) - self.origins[owners]
+        origins = self.origins[owners]
+        d = np.atleast_2d(points) - origins
         e, beside, a, r = _cells(d)
         reach = np.minimum(self._free(owners, e, beside, a), r) - BACK  # NaN: never seen
         reach[~(reach > BACK)] = np.nan
-        return self.origins[owners] + (reach / np.maximum(r, 1e-9))[:, None] * d
+        return origins + (reach / np.maximum(r, 1e-9))[:, None] * d
 
     def contains(self, points: np.ndarray, shrink: float = 0.0, body: bool = True) -> np.ndarray:
         """Whether each (N, 3) point is known free."""
