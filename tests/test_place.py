@@ -9,9 +9,12 @@ from gmmap.errors import InvalidInputError
 from gmmap.eval.place import positives, pr_curve, recall_curve
 from gmmap.io.sim import World, simulate
 from gmmap.io.sim.world import cabinet, chair, pillar, shelf, table, wall
-from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample
+from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample, turned
 from gmmap.mapping.submap import BuildOptions, build_submaps
 from gmmap.math.em import fit_gmm
+from gmmap.math.gmm import Gmm
+from gmmap.math.register import register
+from gmmap.options import RegisterOptions
 
 
 def yaw_matrix(yaw: float, t=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -91,6 +94,35 @@ def test_verification_accepts_true_and_rejects_wrong_candidate(room_submaps):
     truth = np.linalg.inv(a.gt_anchor) @ b.gt_anchor
     T = matches[a.robot].registration.transform
     assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.1
+
+
+def corridor_with_shelves() -> Gmm:
+    """An 8 m corridor (walls at y = ±1), shelves along the far half of one wall."""
+    flat = np.diag([0.15**2, 0.01**2, 0.2**2])
+    means = [[x, y, z] for x in np.arange(0.25, 8, 0.5) for y in (-1, 1) for z in (0.4, 1.2)]
+    means += [[x, 0.6, z] for x in np.arange(5.25, 8, 0.5) for z in (0.4, 1.2)]
+    return Gmm(
+        np.full(len(means), 1 / len(means)), np.array(means), np.tile(flat, (len(means), 1, 1))
+    )
+
+
+def test_a_corridor_end_for_end_is_refused_and_its_right_twin_accepted():
+    """The corridor seen from elsewhere lines up both ways; only the shelves tell which way
+    round. Turned half round, the right alignment scores clearly less (accepted under the
+    default ``max_turned``); the end-for-end one turned back scores more than itself."""
+    candidate = corridor_with_shelves()
+    truth = yaw_matrix(0.5, (1.0, -2.0, 0.0))
+    query = candidate.transform(np.linalg.inv(truth))
+    options, limit = RegisterOptions(), PlaceOptions().max_turned
+    right = register(query, candidate, truth, options=options)
+    centre = truth[:3, :3] @ (query.weights @ query.means) + truth[:3, 3]
+    half = np.diag([-1.0, -1.0, 1.0, 1.0])
+    half[:2, 3] = 2 * centre[:2]
+    wrong = register(query, candidate, half @ truth, options=options)
+    assert wrong.confidence > 0.8  # plausible: the walls line up
+    assert turned(query, candidate, right, options) < limit
+    assert turned(query, candidate, wrong, options) > 1.0
+    assert np.allclose(register(query, candidate, options=options).transform, truth, atol=0.05)
 
 
 def test_own_recent_submaps_are_skipped(small_gmm):

@@ -31,7 +31,14 @@ from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.confusion import confusion
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
-from gmmap.mapping.place import Candidate, Match, PlaceDatabase, descriptor_for, distinct
+from gmmap.mapping.place import (
+    Candidate,
+    Match,
+    PlaceDatabase,
+    descriptor_for,
+    distinct,
+    turned,
+)
 from gmmap.mapping.submap import Submap
 from gmmap.mapping.tfgraph import TfGraph
 from gmmap.math.gmm import Gmm
@@ -100,6 +107,7 @@ class Mapper:
                 anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
             judged = distinct(judged, anchors, self.config.place)
             judged = [self._unconfused(m) if m.accepted else m for m in judged]
+            judged = [self._untwinned(s, m) if m.accepted else m for m in judged]
             matches.extend(self._refined(s, m) if m.accepted else m for m in judged)
             if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
                 accepted = sum(m.accepted for m in matches)
@@ -124,6 +132,17 @@ class Mapper:
         level = max(self._confusion(m.query), self._confusion((m.candidate.robot, m.candidate.seq)))
         ratio = level / m.registration.confidence if m.registration.confidence > 0 else 0.0
         return replace(m, accepted=ratio < options.max_confusion, confusion=ratio)
+
+    def _untwinned(self, query: Submap, m: Match) -> Match:
+        """``m`` refused when its alignment turned half round scores within
+        ``max_turned`` of it (`gmmap.mapping.place.turned`): a symmetric place."""
+        limit = self.config.place.max_turned
+        if limit is None:
+            return m
+        with self._lock:
+            candidate = self.submaps[(m.candidate.robot, m.candidate.seq)].gmm
+        ratio = turned(query.gmm, candidate, m.registration, self.config.register)
+        return replace(m, accepted=ratio < limit, turned=ratio)
 
     def _confusion(self, key: Node) -> float:
         """The confusion of held submap ``key``, computed once, against what is held then."""

@@ -152,7 +152,8 @@ class Match:
     """A verified (or rejected) candidate: ``registration.transform`` maps the query submap's
     anchor frame into the candidate's. ``conflict``: the best confidence, relative to this
     one's, of another verified candidate of the same query in the same robot's map that puts
-    the query elsewhere (`distinct`); ``confusion``: see `gmmap.mapping.confusion`."""
+    the query elsewhere (`distinct`); ``confusion``: see `gmmap.mapping.confusion`; ``turned``:
+    see `turned`."""
 
     query: tuple[str, int]
     candidate: Candidate
@@ -161,6 +162,8 @@ class Match:
     conflict: float = 0.0
     # The higher of the two submaps' `gmmap.mapping.confusion`, relative to this confidence.
     confusion: float = 0.0
+    # The confidence of this alignment turned half round (`turned`), relative to this one.
+    turned: float = 0.0
 
 
 def distinct(
@@ -193,6 +196,27 @@ def distinct(
         accepted = m.accepted and conflict <= options.max_conflict
         out.append(replace(m, accepted=accepted, conflict=conflict))
     return out
+
+
+def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOptions) -> float:
+    """The confidence of ``match``'s alignment turned half round about +z through the query's
+    centre and refined from there, relative to ``match``'s own; 0 when the refinement falls
+    back into ``match``'s basin (within 0.5 m and 30°, as the global search tells basins).
+
+    A corridor seen end for end, or a room with two like halves, lines up both ways. The
+    global search holds a second basin only where one of its starts led there, so it often
+    misses that twin; probing it directly does not. Close to 1, or above: the place is
+    symmetric and this match cannot tell which way round it is.
+    """
+    if match.confidence <= 0:
+        return 0.0
+    T = match.transform
+    centre = T[:3, :3] @ (query.weights @ query.means) + T[:3, 3]
+    half = np.diag([-1.0, -1.0, 1.0, 1.0])
+    half[:2, 3] = 2 * centre[:2]
+    twin = register(query, candidate, half @ T, options=options)
+    t, angle = pose_distance(twin.transform, T)
+    return twin.confidence / match.confidence if t > 0.5 or angle > 30 else 0.0
 
 
 @dataclass
