@@ -9,7 +9,14 @@ from gmmap.errors import InvalidInputError
 from gmmap.eval.place import positives, pr_curve, recall_curve
 from gmmap.io.sim import World, simulate
 from gmmap.io.sim.world import cabinet, chair, pillar, shelf, table, wall
-from gmmap.mapping.place import PlaceDatabase, PlaceOptions, ShapeDescriptor, resample, turned
+from gmmap.mapping.place import (
+    PlaceDatabase,
+    PlaceOptions,
+    ShapeDescriptor,
+    half_turned,
+    resample,
+    turned,
+)
 from gmmap.mapping.submap import BuildOptions, build_submaps
 from gmmap.math.em import fit_gmm
 from gmmap.math.gmm import Gmm
@@ -115,10 +122,7 @@ def test_a_corridor_end_for_end_is_refused_and_its_right_twin_accepted():
     query = candidate.transform(np.linalg.inv(truth))
     options, limit = RegisterOptions(), PlaceOptions().max_turned
     right = register(query, candidate, truth, options=options)
-    centre = truth[:3, :3] @ (query.weights @ query.means) + truth[:3, 3]
-    half = np.diag([-1.0, -1.0, 1.0, 1.0])
-    half[:2, 3] = 2 * centre[:2]
-    wrong = register(query, candidate, half @ truth, options=options)
+    wrong = register(query, candidate, half_turned(query, truth), options=options)
     assert wrong.confidence > 0.8  # plausible: the walls line up
     assert turned(query, candidate, right, options) < limit
     assert turned(query, candidate, wrong, options) > 1.0

@@ -257,9 +257,7 @@ class PlaceOptions:
     confusion_probes: int = 3  #: Own distant submaps confusion is measured against; 0: no test
     # Refuse a match whose alignment, turned half round about the query's centre and refined,
     # scores at least this·C (`place.turned`: a corridor end for end); null: no such test.
-    max_turned: float | None = (
-        0.9  #: Refuse if the match turned half round scores this·C; null: off
-    )
+    max_turned: float | None = 0.9  #: Refuse if the half-turned match scores this·C; null: off
 
     def __post_init__(self) -> None:
         if (

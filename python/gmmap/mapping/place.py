@@ -211,12 +211,18 @@ def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOpt
     if match.confidence <= 0:
         return 0.0
     T = match.transform
-    centre = T[:3, :3] @ (query.weights @ query.means) + T[:3, 3]
-    half = np.diag([-1.0, -1.0, 1.0, 1.0])
-    half[:2, 3] = 2 * centre[:2]
-    twin = register(query, candidate, half @ T, options=options)
+    twin = register(query, candidate, half_turned(query, T), options=options)
     t, angle = pose_distance(twin.transform, T)
     return twin.confidence / match.confidence if t > 0.5 or angle > 30 else 0.0
+
+
+def half_turned(query: Gmm, transform: np.ndarray) -> np.ndarray:
+    """``transform`` followed by a half turn about +z through where it puts the query's
+    centre."""
+    centre = transform[:3, :3] @ (query.weights @ query.means) + transform[:3, 3]
+    half = np.diag([-1.0, -1.0, 1.0, 1.0])
+    half[:2, 3] = 2 * centre[:2]
+    return half @ transform
 
 
 @dataclass
