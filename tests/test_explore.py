@@ -99,6 +99,11 @@ def _frame(at, points) -> Frame:
     return Frame(0.0, np.asarray(points, dtype=np.float32) - [*at, 0.0], pose)
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="known flaw (docs/guide/explore.md): a horizon bins every frame within "
+    "explore.horizon_spacing as if seen from its viewpoint",
+)
 def test_a_view_from_elsewhere_does_not_free_a_jamb_beside_the_viewpoint():
     """A horizon's viewpoint north of a wall whose end (a door jamb) lies 0.5 m south of it;
     the next view, 0.94 m away through the door, sees far south. The line from the viewpoint
@@ -108,19 +113,6 @@ def test_a_view_from_elsewhere_does_not_free_a_jamb_beside_the_viewpoint():
     recorder.add(_frame([0.3, 0.5], [[0.3, 3.0, 0.5]]))
     recorder.add(_frame([-0.1, -0.35], [[0.3, -3.0, 0.5]]))
     assert not FreeSpace(recorder.all()).contains([[0.3, 0.0]], body=False)[0]
-
-
-def test_a_view_from_elsewhere_fills_directions_known_free_from_the_viewpoint():
-    """A viewpoint that saw only east, then a 360° view 0.5 m east of it, 3 m of floor all
-    round: north of the viewpoint the line lies inside that view, so it is known free (to
-    where the view's floor ends); a line through a surface a view stops at is not."""
-    ring = [[0.5 + 3 * np.cos(a), 3 * np.sin(a), 0.0] for a in np.linspace(0, 6.28, 720)]
-    recorder = HorizonRecorder(72, 1.0, (0.05, 1.2))
-    recorder.add(_frame([0.0, 0.0], [[1.0, 0.05, 0.0]]))
-    recorder.add(_frame([0.5, 0.0], ring))
-    (horizon,) = recorder.all()
-    assert 2.6 <= horizon.ranges[18] <= 3.0  # the bin of +y
-    assert FreeSpace([horizon]).contains([[0.0, 2.5]], body=False)[0]
 
 
 def test_free_space_is_inside_some_horizon_and_frontiers_lie_beside_it():

@@ -51,11 +51,6 @@ Node = tuple[str, int]
 # between two of 8, where a depth camera's robot, blind beside it, drove into walls).
 RING = np.linspace(0, 2 * math.pi, 16, endpoint=False)
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
-# The team's occupancy at and above which horizons do not clear a footprint: surfaces the
-# mixtures hold firmly. A depth run on random-office:109 (130 s): where horizons claimed a
-# footprint free, truly free ones reached 0.92 at most, truly blocked ones 1.06 in the median
-# (a door jamb struck at 1.28); the ring of footprint points misses a jamb between them.
-SOLID = 1.0
 
 
 @dataclass
@@ -265,7 +260,7 @@ class Explorer:
         team = self.knowledge().field
         if team is not None and len(team):
             out = team.occupancy_tiled(xy)
-            out[self.roomy(xy, space or self.space()) & (out < SOLID)] = 0.0
+            out[self.roomy(xy, space or self.space())] = 0.0
         if live is not None and len(live):
             out = np.maximum(out, live.occupancy_tiled(xy))
         return out
@@ -465,7 +460,7 @@ class _MaxField:
         occ, grad = np.zeros(len(xy)), np.zeros((len(xy), 2))
         if self.team is not None and len(self.team):
             occ, grad = self.team.gradient(xy)
-            roomy = self.explorer.roomy(xy, self.space) & (occ < SOLID)
+            roomy = self.explorer.roomy(xy, self.space)
             occ[roomy], grad[roomy] = 0.0, 0.0
         if self.live is not None and len(self.live):
             o, g = self.live.gradient(xy)

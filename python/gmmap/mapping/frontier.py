@@ -36,7 +36,6 @@ from gmmap.mapping.frame import Frame
 
 RANGE_STEP = 0.1  # metres per range unit on the wire
 BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
-REACH = 0.2  # metres: views within this of a viewpoint count as seen from it (a robot radius)
 MAX_CODE = 255
 BACK = 0.4  # metres a frontier's target lies inside the horizon that sees it
 BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
@@ -146,20 +145,6 @@ def decode_horizons(data: bytes) -> list[Horizon]:
     return out
 
 
-def known_along(horizon: Horizon, space: FreeSpace, most: float) -> np.ndarray:
-    """How far, up to ``most`` m, along each of ``horizon``'s directions (its bins' centres)
-    the line from its viewpoint stays inside ``space``, past the robot's own disc
-    (``REACH``); 0 where it does not get out of that disc."""
-    bins = len(horizon.ranges)
-    angle = (np.arange(bins) + 0.5) * 2 * math.pi / bins
-    r = np.arange(REACH, max(most, REACH) + RANGE_STEP, RANGE_STEP)
-    u = np.stack([np.cos(angle), np.sin(angle)], -1)
-    pts = horizon.origin + r[None, :, None] * u[:, None, :]
-    inside = space.contains(pts.reshape(-1, 2), body=False).reshape(bins, len(r))
-    first_out = np.where(inside.all(axis=1), len(r), np.argmin(inside, axis=1))
-    return np.where(first_out > 0, r[np.maximum(first_out - 1, 0)], 0.0)
-
-
 class HorizonRecorder:
     """The horizons of a robot's path since its last submap, in its map frame."""
 
@@ -178,21 +163,7 @@ class HorizonRecorder:
         if self.current is None:
             self.current = Horizon(origin, np.full(self.bins, np.nan))
         seen = horizon_from(pts, self.current.origin, self.band, self.bins)
-        if np.isnan(seen).all():
-            return
-        if np.linalg.norm(origin - self.current.origin) < REACH:
-            self.current.ranges = merge_ranges(self.current.ranges, seen)
-            return
-        own = Horizon(origin, horizon_from(pts, origin, self.band, self.bins))
-        known = known_along(self.current, FreeSpace([self.current, own]), np.nanmax(seen))
-        # A view from elsewhere frees a line from the viewpoint only as far as the line is
-        # known free: beside the viewpoint it may pass a surface neither view saw (a door
-        # jamb seen past by a view through the door). Cut short for want of knowledge, a
-        # range says nothing about an obstacle there: it only fills a direction not seen.
-        cut = ~np.isnan(seen) & (known < seen - 2 * RANGE_STEP)
-        fill = np.where(np.isnan(self.current.ranges) & (known > 0), known, self.current.ranges)
-        whole = merge_ranges(self.current.ranges, np.where(known > 0, seen, np.nan))
-        self.current.ranges = np.where(cut, fill, whole)
+        self.current.ranges = merge_ranges(self.current.ranges, seen)
 
     def all(self) -> list[Horizon]:
         return self.closed + ([self.current] if self.current is not None else [])
