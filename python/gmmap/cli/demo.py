@@ -101,7 +101,7 @@ def run_demo(
     relays = start_relays(config, ports, reach)
     log(f"starting {sim.robots} robot processes in {sim.world} (fleet {fleet}, output {out})")
     for i, name in enumerate(names):
-        own = _robot_config(config, i, names, ports, fleet, out, relays, reach)
+        own = robot_config(config, i, names, ports, fleet, out, relays, reach)
         if secure:
             own = secured(own, members[name])
         cmd = [
@@ -114,7 +114,7 @@ def run_demo(
             cmd += ["--max-frames", str(max_frames)]
         if i == 0:  # the lowest name: the reference of whatever group it is in
             cmd += ["--map-png", str(out / "map.png")]
-        procs.append(_launch(cmd, log, readers))
+        procs.append(launch(cmd, log, readers))
         if crash and crash[0] == i:
             store = out / f"{name}.sqlite"
             args = (procs, i, cmd, store, crash[1], log, readers)
@@ -123,7 +123,7 @@ def run_demo(
     watcher = None
     if station:
         cmd = station_command(config, fleet, ports, out, members.get("station"))
-        watcher = _launch(cmd, log, readers)
+        watcher = launch(cmd, log, readers)
     if crash:
         crasher.join()
     codes = [p.wait() for p in procs]
@@ -203,7 +203,7 @@ def station_command(
     return cmd + ([] if credentials is None else ["--credentials", str(credentials)])
 
 
-def _robot_config(
+def robot_config(
     config: Config,
     i: int,
     names: list[str],
@@ -253,7 +253,7 @@ def _robot_config(
     return replace(config, robot=robot, transport=transport)
 
 
-def _launch(cmd: list[str], log, readers: list[threading.Thread]) -> subprocess.Popen:
+def launch(cmd: list[str], log, readers: list[threading.Thread]) -> subprocess.Popen:
     """A robot process, its output relayed to ``log`` by a thread added to ``readers``."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     readers.append(threading.Thread(target=_relay, args=(proc, log), daemon=True))
@@ -282,7 +282,7 @@ def _crash(procs: list, i: int, cmd: list[str], store: Path, after: int, log, re
     os.kill(procs[i].pid, signal.SIGKILL)
     procs[i].wait()
     log(f"{name}: killed with SIGKILL after {after} submaps; starting it again on its store")
-    procs[i] = _launch(cmd, log, readers)
+    procs[i] = launch(cmd, log, readers)
 
 
 def _relay(proc: subprocess.Popen, log) -> None:
@@ -440,7 +440,7 @@ def format_report(r: dict) -> str:
     "--explore",
     is_flag=True,
     help="The robots explore the world instead of following routes (gmmap explore without "
-    "its baselines: one process, perfect odometry).",
+    "its baselines: a process each, perfect odometry).",
 )
 @config_option
 @as_json_option

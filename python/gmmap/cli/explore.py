@@ -25,6 +25,13 @@ BASELINES = {"alone": ("shared", 1), "no_sharing": ("no-sharing", None), "dense"
     "baseline on the same world (each as long as the run itself).",
 )
 @click.option(
+    "--processes/--in-process",
+    default=True,
+    show_default=True,
+    help="Each robot sharing GMMs is a gmmap robot --explore process talking to its peers "
+    "over Zenoh (the baselines run in this process), or every robot runs in this process.",
+)
+@click.option(
     "--aerial",
     is_flag=True,
     help="One aerial robot with a 32-beam ±45° LiDAR explores in 3D (try --world two-storey); "
@@ -37,7 +44,9 @@ BASELINES = {"alone": ("shared", 1), "no_sharing": ("no-sharing", None), "dense"
 )
 @config_option
 @as_json_option
-def command(baselines: bool, aerial: bool, out: Path | None, config: Config, as_json: bool) -> None:
+def command(
+    baselines: bool, processes: bool, aerial: bool, out: Path | None, config: Config, as_json: bool
+) -> None:
     """Explore a simulated world with robots that share GMM submaps and free-space horizons.
 
     No route is scripted: each robot chooses frontiers of what the team has seen, routes
@@ -48,14 +57,20 @@ def command(baselines: bool, aerial: bool, out: Path | None, config: Config, as_
     robot has a frontier left or after explore.time_budget simulated seconds. With
     --aerial, one flying robot explores in 3D and coverage counts surfaces at every height.
     """
-    explore_and_report(config, baselines, out, as_json, aerial)
+    explore_and_report(config, baselines, out, as_json, aerial, processes)
 
 
 def explore_and_report(
-    config: Config, baselines: bool, out: Path | None, as_json: bool, aerial: bool = False
+    config: Config,
+    baselines: bool,
+    out: Path | None,
+    as_json: bool,
+    aerial: bool = False,
+    processes: bool = True,
 ) -> None:
     """Runs the exploration (and its baselines), writes ``out`` and prints the report."""
     from gmmap.eval.explore.aerial import run_aerial
+    from gmmap.eval.explore.processes import run_processes
     from gmmap.eval.explore.team import run_explore
 
     o = config.sim
@@ -64,8 +79,9 @@ def explore_and_report(
         main = run_aerial(config, progress=log)
     else:
         log(f"exploring {o.world} with {o.robots} robots ({o.sensor}), sharing GMM submaps")
-        main = run_explore(config, "shared", progress=log)
-    report = {**main.summary()}
+        run = run_processes if processes else run_explore
+        main = run(config, progress=log)
+    report = {**main.summary(), "processes": processes and not aerial}
     runs = {"aerial" if aerial else "shared": main}
     if baselines and not aerial:
         report["baselines"] = {}

@@ -37,6 +37,12 @@ from gmmap.config import Config
 @click.option("--data", type=click.Path(exists=True, path_type=Path), help="A dataset to map.")
 @click.option("--sim", "simulated", is_flag=True, help="Map a simulated robot (sim section).")
 @click.option("--sim-index", type=int, default=0, show_default=True, help="Which simulated robot.")
+@click.option(
+    "--explore",
+    is_flag=True,
+    help="Explore the sim section's world as robot --sim-index of a gmmap explore --processes "
+    "run (its simulator gives the ticks).",
+)
 @click.option("--ros2", is_flag=True, help="Map live ROS 2 topics over Zenoh (the ros section).")
 @click.option("--ros1", is_flag=True, help="Map live ROS 1 topics (make ros1; the ros section).")
 @sim_settings
@@ -87,6 +93,7 @@ from gmmap.config import Config
 def command(
     data: Path | None,
     simulated: bool,
+    explore: bool,
     ros2: bool,
     ros1: bool,
     sim_index: int,
@@ -109,8 +116,14 @@ def command(
         plain = config.transport.link_protocol.upper()
         why = "no --credentials: a trusted lab"
         log(f"{config.robot.name}: plain {plain}, submaps unsigned ({why})")
-    if sum((data is not None, simulated, ros2, ros1)) != 1:
-        raise click.UsageError("give exactly one of --data, --sim, --ros2 and --ros1")
+    if sum((data is not None, simulated, explore, ros2, ros1)) != 1:
+        raise click.UsageError("give exactly one of --data, --sim, --explore, --ros2 and --ros1")
+    if explore:
+        from gmmap.fleet.node.explorer import ExplorerNode
+
+        r = ExplorerNode(config, sim_index).run()
+        log(f"{r['robot']}: {r['status']}, {r['bytes']} B sent")
+        return
     bridge = None
     if ros2:
         from gmmap.io.ros2bridge import Ros2Bridge

@@ -74,6 +74,13 @@ class Claim:
     goal: np.ndarray | None
 
 
+def goal_moved(before: np.ndarray | None, after: np.ndarray | None) -> bool:
+    """Whether a robot's goal changed enough (5 cm) to tell its peers again."""
+    if before is None or after is None:
+        return (before is None) != (after is None)
+    return bool(np.linalg.norm(before - after) > 0.05)
+
+
 @dataclass
 class Knowledge:
     """The team's map in the robot's frame: horizons, the occupancy field, the route graph."""

@@ -19,7 +19,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.eval.explore.coverage import AerialCoverage
 from gmmap.eval.explore.team import Progress, RunResult, starts
 from gmmap.fleet.wire.codec import encode
-from gmmap.io.sim import Lidar, World, get_world
+from gmmap.io.sim import Lidar, load_world
 from gmmap.io.sim.run import EPOCH
 from gmmap.mapping.aerial.explorer import AerialExplorer, SphereSubmap
 from gmmap.mapping.aerial.space import swept_cells
@@ -31,7 +31,7 @@ START_HEIGHT = 1.2  # metres above the floor the robot takes off to
 def run_aerial(config: Config, progress: Progress | None = None) -> RunResult:
     """One aerial exploration run of ``config``'s world (one robot, its LiDAR)."""
     sim, opt, planner = config.sim, config.explore, config.planner
-    world = World.load(sim.world) if sim.world.endswith(".json") else get_world(sim.world)
+    world = load_world(sim.world)
     if sim.sensor != "lidar":
         raise InvalidInputError("the aerial robot carries a 360° LiDAR: use --sensor lidar")
     # A 32-beam ±45° LiDAR (a Hesai XT32-like dome): a VLP-16's ±15° would leave an aerial

@@ -22,11 +22,9 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.explore.coverage import Coverage
 from gmmap.fleet.wire.codec import encode
-from gmmap.io.datasets.tum import depth_to_points
-from gmmap.io.sim import DepthCamera, Lidar, World, get_world, sim_sensor
+from gmmap.io.sim import DepthCamera, Lidar, World, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
-from gmmap.mapping.explore import Claim, Explorer, SharedSubmap
-from gmmap.mapping.frame import Frame
+from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, goal_moved
 from gmmap.mapping.frontier import FreeSpace
 
 MODES = ("shared", "no-sharing", "dense")
@@ -102,14 +100,6 @@ def starts(world: World, n: int) -> list[tuple[float, float, float]]:
     raise InvalidInputError(f"{world.name}: no room to start {n} robots in a file at {x, y}")
 
 
-def sense(sensor: DepthCamera | Lidar, world: World, pose: np.ndarray, rng) -> np.ndarray:
-    if isinstance(sensor, Lidar):
-        return sensor.scan(world, pose, rng)
-    depth = sensor.render(world, pose, rng)
-    raw = np.round(depth * sensor.depth_factor).astype(np.uint16)
-    return depth_to_points(raw, sensor.intrinsics, sensor.depth_factor, 1, 0.1, 5.0)
-
-
 class Team:
     """The robots of one run and the loop that moves them."""
 
@@ -118,7 +108,7 @@ class Team:
             raise InvalidInputError(f"mode must be one of {MODES}, got {mode!r}")
         sim = config.sim
         self.config, self.mode = config, mode
-        self.world = World.load(sim.world) if sim.world.endswith(".json") else get_world(sim.world)
+        self.world = load_world(sim.world)
         self.sensor = sim_sensor(sim)
         self.n = robots or sim.robots
         self.bodies = [Body(np.array(s[:2]), s[2]) for s in starts(self.world, self.n)]
@@ -145,37 +135,37 @@ class Team:
         dt = 1.0 / sim.rate
         spin = 0.0 if isinstance(self.sensor, Lidar) else 2 * math.pi / opt.turn_rate
         result = RunResult(self.mode, self.world.name, type(self.sensor).__name__, self.n)
-        t0, t, idle = time.perf_counter(), 0.0, [False] * self.n
+        t0, t = time.perf_counter(), 0.0
         while t < opt.time_budget:
-            for i in range(self.n):
-                self._sense(i, t)
-            for i in range(self.n):
-                idle[i] = not self._move(i, t, dt, spin)
+            idle = [not moving for moving in self._tick(t, dt, spin)]
             if t - (result.curve[-1][0] if result.curve else -1e9) >= 2.0:
                 self._measure(result, t, progress)
             t += dt
             if all(idle) and t > spin:
                 break
-        for i in range(self.n):
-            self._share(i, self.agents[i].flush())
+        result.statuses = self._finish()
         self._measure(result, t, progress)
         result.sim_time_s, result.wall_time_s = t, time.perf_counter() - t0
         result.collisions = sum(b.collisions for b in self.bodies)
         result.bytes_per_robot = list(self.bytes)
-        result.statuses = [a.status for a in self.agents]
         result.paths = [b.path for b in self.bodies]
         above = [c[0] for c in result.curve if c[1] >= 0.9]
         result.time_to_90_s = above[0] if above else None
         return result
 
-    def _sense(self, i: int, t: float) -> None:
-        body = self.bodies[i]
-        gt = body.pose() @ self.sensor.mount()
-        rng = np.random.default_rng([self.config.sim.seed, i, round(t * 1000)])
-        points = sense(self.sensor, self.world, gt, rng)
-        odom = np.linalg.inv(self.map_to_world[i]) @ gt
-        self._share(i, self.agents[i].observe(Frame(EPOCH + t, points, odom, gt)))
-        body.path.append([round(float(body.xy[0]), 3), round(float(body.xy[1]), 3)])
+    def _tick(self, t: float, dt: float, spin: float) -> list[bool]:
+        """Every robot senses, then moves; whether each still has somewhere to go."""
+        for i in range(self.n):
+            seed, start = self.config.sim.seed, self.map_to_world[i]
+            frame = sensed(self.sensor, self.world, seed, i, t, self.bodies[i].pose(), start)
+            self._share(i, self.agents[i].observe(frame))
+        return [self._move(i, t, dt, spin) for i in range(self.n)]
+
+    def _finish(self) -> list[str]:
+        """The robots stop: each shares the submap of its last frames; their statuses."""
+        for i in range(self.n):
+            self._share(i, self.agents[i].flush())
+        return [a.status for a in self.agents]
 
     def _share(self, i: int, shared: SharedSubmap | None) -> None:
         if shared is None:
@@ -192,20 +182,14 @@ class Team:
 
     def _move(self, i: int, t: float, dt: float, spin: float) -> bool:
         """One step of robot i; False when it has nowhere to go."""
-        body, opt, agent = self.bodies[i], self.config.explore, self.agents[i]
+        body, opt = self.bodies[i], self.config.explore
+        body.path.append([round(float(body.xy[0]), 3), round(float(body.xy[1]), 3)])
         if t < spin:
             body.yaw += opt.turn_rate * dt
             return True
-        before = agent.claim().goal
-        direction = agent.next_direction(EPOCH + t)
-        after = agent.claim()
-        if self.mode != "no-sharing" and _moved(before, after.goal):
-            self.bytes[i] += CLAIM_BYTES
-            for j, other in enumerate(self.agents):
-                if j != i:
-                    other.receive_claim(self.names[i], Claim(after.position, after.goal))
+        direction, exploring = self._decide(i, t)
         if direction is None:
-            return agent.status == "exploring"
+            return exploring
         # A holonomic base: it moves along the direction and turns its sensor towards it; a
         # depth camera's robot first turns until it faces where it goes (it sees only ahead).
         d = self.map_to_world[i][:2, :2] @ direction
@@ -225,26 +209,38 @@ class Team:
             body.xy = target
         return True
 
+    def _decide(self, i: int, t: float) -> tuple[np.ndarray | None, bool]:
+        """Robot i's direction of travel in its map frame (None: it stays) and whether it is
+        still exploring; a goal it changed goes to its peers as a claim."""
+        agent = self.agents[i]
+        before = agent.claim().goal
+        direction = agent.next_direction(EPOCH + t)
+        after = agent.claim()
+        if self.mode != "no-sharing" and goal_moved(before, after.goal):
+            self.bytes[i] += CLAIM_BYTES
+            for j, other in enumerate(self.agents):
+                if j != i:
+                    other.receive_claim(self.names[i], Claim(after.position, after.goal))
+        return direction, agent.status == "exploring"
+
+    def _horizons(self) -> list:
+        """The team's horizons in the world frame (the area it knows is free)."""
+        horizons = []
+        for i, agent in enumerate(self.agents):
+            horizons += [h.moved(self.map_to_world[i]) for h in agent.own_horizons()]
+        return horizons
+
     def _measure(self, result: RunResult, t: float, progress: Progress | None) -> None:
         if self.grid is not None:
             area = self.coverage.area(self.grid.known_free)
         else:
-            horizons = []
-            for i, agent in enumerate(self.agents):
-                horizons += [h.moved(self.map_to_world[i]) for h in agent.own_horizons()]
-            area = self.coverage.area(FreeSpace(horizons).contains)
+            area = self.coverage.area(FreeSpace(self._horizons()).contains)
         result.curve.append((round(t, 2), round(self.coverage.surface, 4), round(area, 4)))
         result.coverage, result.area = self.coverage.surface, area
         if progress and len(result.curve) % 10 == 0:
             progress(
                 f"{self.mode}: t {t:.0f} s, surface {self.coverage.surface:.0%}, area {area:.0%}"
             )
-
-
-def _moved(before: np.ndarray | None, after: np.ndarray | None) -> bool:
-    if before is None or after is None:
-        return (before is None) != (after is None)
-    return bool(np.linalg.norm(before - after) > 0.05)
 
 
 def run_explore(

@@ -5,15 +5,16 @@ from gmmap.io.sim.run import (
     UP,
     Paced,
     SimRobot,
+    sensed,
     simulate,
     simulate_options,
     write_pointfiles,
     write_run,
     write_tum,
 )
-from gmmap.io.sim.sensors import DepthCamera, Lidar, sim_sensor
+from gmmap.io.sim.sensors import DepthCamera, Lidar, sense, sim_sensor
 from gmmap.io.sim.world import Box, Cylinder, World
-from gmmap.io.sim.worlds import WORLDS, get_world
+from gmmap.io.sim.worlds import WORLDS, get_world, load_world
 
 __all__ = [
     "UP",
@@ -27,7 +28,10 @@ __all__ = [
     "SimRobot",
     "World",
     "get_world",
+    "load_world",
     "route_poses",
+    "sense",
+    "sensed",
     "sim_sensor",
     "simulate",
     "simulate_options",

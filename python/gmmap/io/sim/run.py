@@ -17,9 +17,9 @@ from gmmap.io.datasets.ply import write_ply
 from gmmap.io.datasets.trajectory import write_trajectory
 from gmmap.io.datasets.tum import depth_to_points
 from gmmap.io.sim.robots import Motion, route_poses
-from gmmap.io.sim.sensors import DepthCamera, Lidar, sim_sensor
+from gmmap.io.sim.sensors import DepthCamera, Lidar, sense, sim_sensor
 from gmmap.io.sim.world import World
-from gmmap.io.sim.worlds import get_world
+from gmmap.io.sim.worlds import load_world
 from gmmap.mapping.frame import Frame
 from gmmap.math.drift import Drift
 from gmmap.options import SimOptions
@@ -235,7 +235,25 @@ def write_run(
 def simulate_options(options: SimOptions, max_frames: int | None = None) -> list[SimRobot]:
     """`simulate` as the ``sim`` section of the configuration describes it."""
     o = options
-    world = World.load(o.world) if o.world.endswith(".json") else get_world(o.world)
+    world = load_world(o.world)
     drift = Drift.per_metre(o.drift, o.seed, UP)
     motion = Motion(speed=o.speed, rate=o.rate, sway=o.sway)
     return simulate(world, o.robots, o.seed, sim_sensor(o), motion, drift, max_frames)
+
+
+def sensed(
+    sensor: DepthCamera | Lidar,
+    world: World,
+    seed: int,
+    i: int,
+    t: float,
+    body: np.ndarray,
+    start: np.ndarray,
+) -> Frame:
+    """Robot i's frame at time t of a run: its sensor's points with the body at ``body``
+    (4x4, world; the frame's ``gt_pose``), its odometry perfect from ``start`` (its map frame
+    in the world). The noise depends on (seed, i, t) alone: a robot renders the same frame
+    in its own process as in the simulator's."""
+    gt = body @ sensor.mount()
+    rng = np.random.default_rng([seed, i, round(t * 1000)])
+    return Frame(EPOCH + t, sense(sensor, world, gt, rng), np.linalg.inv(start) @ gt, gt)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gmmap.io.datasets.tum import Intrinsics
+from gmmap.io.datasets.tum import Intrinsics, depth_to_points
 from gmmap.io.sim.world import World
 from gmmap.options import SimOptions
 
@@ -117,6 +117,16 @@ class Lidar:
         r = r[hit] + self.noise_std * rng.standard_normal(int(hit.sum()))
         keep = (r > self.min_range) & (r < self.max_range)
         return (dirs[hit][keep] * r[keep, None]).astype(np.float32)
+
+
+def sense(sensor: DepthCamera | Lidar, world: World, pose: np.ndarray, rng) -> np.ndarray:
+    """One frame's points in the sensor frame, the sensor at ``pose`` (4x4, world): a LiDAR
+    scan, or a depth image quantised as a TUM PNG stores it and back-projected (0.1-5 m)."""
+    if isinstance(sensor, Lidar):
+        return sensor.scan(world, pose, rng)
+    depth = sensor.render(world, pose, rng)
+    raw = np.round(depth * sensor.depth_factor).astype(np.uint16)
+    return depth_to_points(raw, sensor.intrinsics, sensor.depth_factor, 1, 0.1, 5.0)
 
 
 def sim_sensor(options: SimOptions) -> DepthCamera | Lidar:

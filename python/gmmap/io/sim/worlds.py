@@ -181,6 +181,11 @@ WORLDS = {
 }
 
 
+def load_world(name: str) -> World:
+    """A world file (``.json``, `World.save`) or a world `get_world` knows by name."""
+    return World.load(name) if name.endswith(".json") else get_world(name)
+
+
 def get_world(name: str) -> World:
     """A built-in world by name, or a procedural office, ``random-office:<seed>``
     (`gmmap.io.sim.procedural`)."""
