@@ -7,8 +7,9 @@ import pytest
 
 from gmmap.errors import InvalidInputError
 from gmmap.eval.place import positives, pr_curve, recall_curve
-from gmmap.io.sim import World, simulate
-from gmmap.io.sim.world import cabinet, chair, pillar, shelf, table, wall
+from gmmap.io.sim import DepthCamera, Lidar, World, sense, simulate
+from gmmap.io.sim.world import Box, cabinet, chair, pillar, shelf, slab, table, wall
+from gmmap.mapping.frame import Frame
 from gmmap.mapping.place import (
     PlaceDatabase,
     PlaceOptions,
@@ -127,6 +128,50 @@ def test_a_corridor_end_for_end_is_refused_and_its_right_twin_accepted():
     assert turned(query, candidate, right, options) < limit
     assert turned(query, candidate, wrong, options) > 1.0
     assert np.allclose(register(query, candidate, options=options).transform, truth, atol=0.05)
+
+
+def sensed_corridor(sensor, path: list[tuple[float, float, float]], start) -> Gmm:
+    """One submap of ``sensor``'s frames along ``path`` (x, y, yaw) in an 8 x 2 m corridor
+    with a ceiling and 3 m of shelves along one wall's far end; its anchor is ``start``."""
+    shapes = [
+        slab(0, -1, 8, 1, -0.025),
+        slab(0, -1, 8, 1, 2.5),
+        Box((6.5, 0.8, 0.75), (3, 0.4, 1.5)),
+    ]
+    for a, b in (((0, -1), (8, -1)), ((8, -1), (8, 1)), ((8, 1), (0, 1)), ((0, 1), (0, -1))):
+        shapes += wall(*a, *b)
+    world, rng = World("corridor", shapes), np.random.default_rng(0)
+    frames = []
+    for k, (x, y, yaw) in enumerate(path):
+        gt = yaw_matrix(yaw, (x, y, 0.0)) @ sensor.mount()
+        pose = np.linalg.inv(yaw_matrix(path[0][2], (*path[0][:2], 0.0))) @ gt
+        frames.append(Frame(k * 0.1, sense(sensor, world, gt, rng), start @ pose, gt))
+    (submap,) = build_submaps(frames, options=BuildOptions(frames_per_submap=len(frames)))
+    return submap
+
+
+@pytest.mark.parametrize("sensor", ["lidar360", "depth"])
+def test_a_sensed_corridor_end_for_end_is_refused_and_its_right_twin_accepted(sensor):
+    """The same, on a simulated handheld 360° LiDAR (32 beams, ±45°) in the corridor's
+    shelved half, and on the depth camera looking down its bare half: two robots over the
+    same stretch, their map frames apart."""
+    if sensor == "lidar360":
+        device = Lidar(beams=32, fov_up=45, fov_down=-45, max_range=30)
+        xs, ys = np.arange(4.0, 6.01, 0.25), (0.0, -0.2)
+    else:
+        device = DepthCamera.scaled(320, 240, True)
+        xs, ys = np.arange(0.5, 2.01, 0.1), (0.0, -0.2)
+    a = sensed_corridor(device, [(x, ys[0], 0.0) for x in xs], np.eye(4))
+    b = sensed_corridor(device, [(x + 0.2, ys[1], 0.3) for x in xs], yaw_matrix(1.0, (3, 2, 0)))
+    truth = np.linalg.inv(a.gt_anchor) @ b.gt_anchor
+    options, limit = RegisterOptions(), PlaceOptions().max_turned
+    right = register(b.gmm, a.gmm, truth, options=options)
+    wrong = register(b.gmm, a.gmm, half_turned(b.gmm, truth), options=options)
+    assert wrong.confidence > 0.4  # the walls line up end for end
+    assert turned(b.gmm, a.gmm, right, options) < limit
+    assert turned(b.gmm, a.gmm, wrong, options) > limit
+    found = register(b.gmm, a.gmm, options=options).transform
+    assert np.linalg.norm(found[:3, 3] - truth[:3, 3]) < 0.1
 
 
 def test_own_recent_submaps_are_skipped(small_gmm):
