@@ -9,6 +9,9 @@ team's), ``time_vs_dense`` (the team's over dense's) and ``bytes_dense_over_gmm`
 are procedural offices never used while the explorer was written (it was tried on ``office``
 and ``passage``).
 
+``processes`` (``--processes random-office:101``): the team sharing GMMs with each robot a
+``gmmap robot --explore`` process over Zenoh (`gmmap explore`'s default) and in one process
+(the rest of this benchmark), on the same world: coverage, collisions, bytes and wall time.
 ``sweep`` (``--sweep random-office:103,...``): the team alone on more worlds and sensors
 (``--sweep-sensors``, ``--sweep-budget`` simulated seconds): collisions, coverage, time to
 90 % and each robot's status at the end. ``aerial`` (``--aerial two-storey``): one aerial
@@ -17,6 +20,7 @@ baseline for it. ``collisions`` counts every run of all parts.
 
     .venv/bin/python benchmarks/explore.py [--worlds random-office:101,...] [--sensors lidar]
         [--sweep random-office:103,...] [--sweep-sensors lidar,depth] [--sweep-budget 150]
+        [--processes random-office:101] [--processes-sensors lidar] [--processes-budget 150]
         [--aerial two-storey] [--aerial-budget 300]
 """
 
@@ -29,6 +33,7 @@ from dataclasses import replace
 
 from gmmap.config import Config
 from gmmap.eval.explore.aerial import run_aerial
+from gmmap.eval.explore.processes import run_processes
 from gmmap.eval.explore.team import run_explore
 
 MODES = {"gmm": ("shared", None), "alone": ("shared", 1), "no_sharing": ("no-sharing", None)}
@@ -83,6 +88,32 @@ def sweep(worlds: list[str], sensors: list[str], robots: int, budget: float) -> 
     }
 
 
+def processes(worlds: list[str], sensors: list[str], robots: int, budget: float) -> dict:
+    """The team as robot processes and in one process: the same exploration, its wall time."""
+    runs = []
+    keep = ("coverage", "time_to_90_s", "collisions", "bytes_per_robot", "wall_time_s")
+    for world in worlds:
+        for sensor in sensors:
+            config = configured(world, sensor, robots, budget)
+            print(f"processes {world} {sensor}", file=sys.stderr)
+            apart = run_processes(config).summary()
+            print(f"in one process {world} {sensor}", file=sys.stderr)
+            together = run_explore(config, "shared").summary()
+            runs.append(
+                {
+                    "world": world,
+                    "sensor": sensor,
+                    "processes": {k: apart[k] for k in keep},
+                    "in_process": {k: together[k] for k in keep},
+                    "wall_processes_over_in_process": ratio(
+                        apart["wall_time_s"], together["wall_time_s"]
+                    ),
+                }
+            )
+    collisions = sum(r[m]["collisions"] for r in runs for m in ("processes", "in_process"))
+    return {"budget_s": budget, "robots": robots, "runs": runs, "collisions": collisions}
+
+
 def aerial(worlds: list[str], budget: float) -> list[dict]:
     """One aerial robot per world, in 3D."""
     out = []
@@ -102,6 +133,9 @@ def main() -> None:
     parser.add_argument("--sweep", default="", help="more worlds, the team alone (collisions)")
     parser.add_argument("--sweep-sensors", default="lidar,depth")
     parser.add_argument("--sweep-budget", type=float, default=150.0, help="simulated seconds")
+    parser.add_argument("--processes", default="", help="worlds run as robot processes too")
+    parser.add_argument("--processes-sensors", default="lidar")
+    parser.add_argument("--processes-budget", type=float, default=150.0, help="simulated seconds")
     parser.add_argument("--aerial", default="", help="worlds an aerial robot explores in 3D")
     parser.add_argument("--aerial-budget", type=float, default=300.0, help="simulated seconds")
     args = parser.parse_args()
@@ -114,11 +148,16 @@ def main() -> None:
     if args.sweep:
         sensors = args.sweep_sensors.split(",")
         out["sweep"] = sweep(args.sweep.split(","), sensors, args.robots, args.sweep_budget)
+    if args.processes:
+        sensors = args.processes_sensors.split(",")
+        worlds = args.processes.split(",")
+        out["processes"] = processes(worlds, sensors, args.robots, args.processes_budget)
     if args.aerial:
         out["aerial"] = aerial(args.aerial.split(","), args.aerial_budget)
     in_cases = sum(r["collisions"] for c in cases for r in c["runs"].values())
     in_aerial = sum(r["collisions"] for r in out.get("aerial", []))
-    out["collisions"] = in_cases + out.get("sweep", {}).get("collisions", 0) + in_aerial
+    parts = sum(out.get(k, {}).get("collisions", 0) for k in ("sweep", "processes"))
+    out["collisions"] = in_cases + parts + in_aerial
     print(json.dumps(out, indent=1))
 
 

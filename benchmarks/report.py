@@ -103,7 +103,9 @@ DESCRIPTIONS: dict[str, str] = {
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
     "without sharing, and frontier exploration on a 5 cm grid from shared point clouds (given "
-    "the frames between robots). `aerial`: one aerial robot exploring in 3D (`gmmap explore "
+    "the frames between robots). `processes`: the same team with each robot a `gmmap robot "
+    "--explore` process over Zenoh (`gmmap explore`'s default) beside it in one process, "
+    "and the wall time of each. `aerial`: one aerial robot exploring in 3D (`gmmap explore "
     "--aerial`, a 32-beam ±45° LiDAR; coverage of the surfaces at every height, `area` the "
     "share of the reachable space known free), with no baseline.",
 }

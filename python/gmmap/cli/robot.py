@@ -120,8 +120,9 @@ def command(
         raise click.UsageError("give exactly one of --data, --sim, --explore, --ros2 and --ros1")
     if explore:
         from gmmap.fleet.node.explorer import ExplorerNode
+        from gmmap.io.sim import Sensing
 
-        r = ExplorerNode(config, sim_index).run()
+        r = ExplorerNode(config, Sensing(config.sim, sim_index)).run()
         log(f"{r['robot']}: {r['status']}, {r['bytes']} B sent")
         return
     bridge = None

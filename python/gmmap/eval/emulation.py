@@ -1,10 +1,16 @@
-"""The demo's emulated links (`gmmap.cli.demo`): robots paced on rendezvous links, who is in
-reach of whom, and a counting relay for every linked pair (`gmmap.eval.links`)."""
+"""The demo's robot processes and emulated links (`gmmap.cli.demo`, and `gmmap explore`'s
+robots): each robot's configuration and endpoints, launching it with its output relayed,
+robots paced on rendezvous links, who is in reach of whom, and a counting relay for every
+linked pair (`gmmap.eval.links`)."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import threading
 import time
 from dataclasses import replace
+from pathlib import Path
 
 from gmmap.config import Config
 
@@ -60,3 +66,86 @@ def start_relays(config: Config, ports: list[int], reach=None) -> dict:
         ).start()
         for i, j in pairs
     }
+
+
+def robot_config(
+    config: Config,
+    i: int,
+    names: list[str],
+    ports: list[int],
+    fleet: str,
+    out: Path,
+    relays: dict | None = None,
+    reach=None,
+) -> Config:
+    """Robot ``i``'s tree: the demo's, with its name, store, peers and endpoints (through
+    the ``relays`` where links are emulated). It waits at the start for the robots linked
+    to it, on rendezvous links (``reach``) only for those in reach there."""
+    from gmmap.eval.links import ZENOH_NO_GOSSIP
+
+    name = names[i]
+    if relays and config.link.topology != "router":
+        linked = sorted({j for pair in relays if i in pair for j in pair} - {i})
+    else:  # every robot in reach, directly or through the router
+        linked = [j for j in range(len(names)) if j != i]
+    waits = [j for j in linked if reach is None or reach.up(min(i, j), max(i, j), frame=0)]
+    robot = replace(
+        config.robot,
+        name=name,
+        fleet=fleet,
+        store=str(out / f"{name}.sqlite"),
+        wait_for=tuple(names[j] for j in waits),
+    )
+    options = config.transport
+    if options.broadcast is not None and options.protocol is None:
+        # One shared channel: UDP links need no TCP handshakes, ACKs or retransmissions, which
+        # took a third of a 500 B/s channel (docs/benchmarks.md, "channel").
+        options = replace(options, protocol="udp")
+    zenoh = dict(options.zenoh_options)
+    mode, listen = options.mode, options.listen
+    if config.link.topology == "router":  # a client of the router: it listens nowhere
+        mode, listen, peers = "client", (), (relays[(i, len(names))].endpoint,)
+    elif relays:
+        # Gossip off: peers would tell each other their own endpoints and meet around a relay.
+        peers = tuple(relays[(i, j)].endpoint for j in linked if j > i)
+        zenoh.update(ZENOH_NO_GOSSIP)
+    else:  # on a shared channel dialled only to fetch what a robot missed
+        peers = tuple(f"{options.link_protocol}/127.0.0.1:{ports[j]}" for j in linked)
+    transport = replace(
+        options, mode=mode, listen=listen, port=ports[i], connect=peers,
+        zenoh_options=zenoh,
+    )  # fmt: skip
+    return replace(config, robot=robot, transport=transport)
+
+
+def launch(cmd: list[str], log, readers: list[threading.Thread]) -> subprocess.Popen:
+    """A robot process, its output relayed to ``log`` by a thread added to ``readers``."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    readers.append(threading.Thread(target=_relay, args=(proc, log), daemon=True))
+    readers[-1].start()
+    return proc
+
+
+def _relay(proc: subprocess.Popen, log) -> None:
+    """Child's status lines and messages → our progress log, as they come."""
+
+    def pump(stream, fmt):
+        for line in stream:
+            line = line.rstrip()
+            if line:
+                log(fmt(line))
+
+    def status(line: str) -> str:
+        try:
+            s = json.loads(line)
+        except ValueError:
+            return line
+        return (
+            f"  {s['robot']}: submap {s['seq']} sent ({s['bytes']} B); {s['received']} received, "
+            f"{s['matches']} matches, groups {s['groups']}"
+        )
+
+    err = threading.Thread(target=pump, args=(proc.stderr, lambda x: f"  {x}"), daemon=True)
+    err.start()
+    pump(proc.stdout, status)
+    err.join(timeout=5)

@@ -69,7 +69,7 @@ class ProcessTeam(Team):
             self._stop()
 
     def _start(self, out: Path) -> None:
-        from gmmap.cli.demo import launch, robot_config
+        from gmmap.eval.emulation import launch, robot_config
         from gmmap.fleet.net.keys import listen_port
 
         names = [*self.names, SIM]

@@ -22,7 +22,7 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.explore.coverage import Coverage
 from gmmap.fleet.wire.codec import encode
-from gmmap.io.sim import DepthCamera, Lidar, World, load_world, sensed, sim_sensor
+from gmmap.io.sim import DepthCamera, Lidar, World, floor_pose, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
 from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, goal_moved
 from gmmap.mapping.frontier import FreeSpace
@@ -44,11 +44,7 @@ class Body:
     blocked: bool = False
 
     def pose(self) -> np.ndarray:
-        T = np.eye(4)
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        T[:2, :2] = [[c, -s], [s, c]]
-        T[:2, 3] = self.xy
-        return T
+        return floor_pose(*self.xy, self.yaw)
 
 
 @dataclass

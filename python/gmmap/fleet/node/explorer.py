@@ -1,26 +1,23 @@
 """An exploring robot as its own process (`gmmap robot --explore`): its `Explorer`, a Zenoh
-transport to its peers, and the simulator's ticks standing in for its sensor and wheels
-(`gmmap.fleet.wire.explore`).
+transport to its peers, and the simulator's ticks standing in for its wheels
+(`gmmap.fleet.wire.explore`); its sensor renders a frame at the true pose a tick gives.
 
 On each tick the robot first takes in every message its peers had sent by their previous
 step (the tick says how many; it waits for them, so what a robot knows does not depend on
 how Zenoh interleaves its links), renders its sensor at the true pose the tick gives, maps
 the frame and sends a submap it completed (kinds ``submap`` and ``horizons``), chooses its
-direction, tells a changed goal (``claim``) and answers (``step``). Its odometry is perfect
-from its first pose, which is its map frame. Peers' submaps arrive as every robot decodes
-them: quantised, as sent.
+direction, tells a changed goal (``claim``) and answers (``step``). Peers' submaps arrive as
+every robot decodes them: quantised, as sent.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import queue
 import time
 from collections import defaultdict
-
-import numpy as np
+from collections.abc import Callable
 
 from gmmap.config import Config
 from gmmap.errors import DecodeError, FileFormatError, TransportError
@@ -35,9 +32,8 @@ from gmmap.fleet.wire.explore import (
     encode_claim,
     encode_json,
 )
-from gmmap.io.sim import load_world, sensed, sim_sensor
-from gmmap.io.sim.run import EPOCH
 from gmmap.mapping.explore import Explorer, SharedSubmap, goal_moved
+from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import decode_horizons, encode_horizons
 
 log = logging.getLogger(__name__)
@@ -48,23 +44,17 @@ TICK_TIMEOUT_S = 600.0  # for the next tick and the messages it says were sent
 READY_EVERY_S = 2.0  # the robot says it is ready again until the first tick comes
 
 
-def body_pose(x: float, y: float, yaw: float) -> np.ndarray:
-    T = np.eye(4)
-    T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
-    T[:2, 3] = x, y
-    return T
+Sense = Callable[[float, float, float, float], Frame]
+"""``sense(t, x, y, yaw)``: the robot's frame at time t, at that true pose on the floor."""
 
 
 class ExplorerNode:
-    """Robot ``index`` of the ``sim`` section's run, named by ``config.robot``; `run` it."""
+    """The robot ``config.robot`` names, its frames from ``sense``; `run` it."""
 
-    def __init__(self, config: Config, index: int) -> None:
-        self.config, self.index = config, index
+    def __init__(self, config: Config, sense: Sense) -> None:
+        self.config, self.sense = config, sense
         self.robot = config.robot.name
         self.explorer = Explorer(self.robot, config)
-        self.world = load_world(config.sim.world)
-        self.sensor = sim_sensor(config.sim)
-        self.start: np.ndarray | None = None
         self.inbox: queue.Queue[tuple[str, str, int, bytes]] = queue.Queue()
         self.ticks: dict[int, Tick] = {}
         self.received: dict[str, int] = defaultdict(int)
@@ -129,19 +119,15 @@ class ExplorerNode:
             log.warning("%s: dropping %s %d of %s: %s", self.robot, kind, seq, robot, exc)
 
     def _step(self, tick: Tick) -> Step:
-        body = body_pose(*tick.poses[self.robot])
-        if self.start is None:
-            self.start = body
         if tick.end:
             self._send(self.explorer.flush())
             return Step(None, self.explorer.status, self.sent, self.bytes)
-        seed = self.config.sim.seed
-        frame = sensed(self.sensor, self.world, seed, self.index, tick.t, body, self.start)
+        frame = self.sense(tick.t, *tick.poses[self.robot])
         self._send(self.explorer.observe(frame))
         if not tick.decide:
             return Step(None, self.explorer.status, self.sent, self.bytes)
         before = self.explorer.claim().goal
-        direction = self.explorer.next_direction(EPOCH + tick.t)
+        direction = self.explorer.next_direction(frame.stamp)
         claim = self.explorer.claim()
         if goal_moved(before, claim.goal):
             self._publish("claim", self.sent, encode_claim(claim))

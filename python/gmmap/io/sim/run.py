@@ -4,6 +4,7 @@ ground truth, and their own odometry (each in its own map frame, unknown to the 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -257,3 +258,29 @@ def sensed(
     gt = body @ sensor.mount()
     rng = np.random.default_rng([seed, i, round(t * 1000)])
     return Frame(EPOCH + t, sense(sensor, world, gt, rng), np.linalg.inv(start) @ gt, gt)
+
+
+def floor_pose(x: float, y: float, yaw: float) -> np.ndarray:
+    """A ground robot's body pose (4x4) at (x, y) on the floor, heading ``yaw``."""
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = x, y
+    return T
+
+
+class Sensing:
+    """Robot ``index``'s frames in an exploration run of the ``sim`` section's world and
+    sensor, at the true floor poses it is given (x, y, yaw), its odometry perfect from the
+    first (its map frame)."""
+
+    def __init__(self, options: SimOptions, index: int) -> None:
+        self.world, self.sensor = load_world(options.world), sim_sensor(options)
+        self.seed, self.index = options.seed, index
+        self.start: np.ndarray | None = None
+
+    def __call__(self, t: float, x: float, y: float, yaw: float) -> Frame:
+        body = floor_pose(x, y, yaw)
+        if self.start is None:
+            self.start = body
+        return sensed(self.sensor, self.world, self.seed, self.index, t, body, self.start)
