@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap.config import Config
+from gmmap.errors import DecodeError, FileFormatError
 from gmmap.eval.explore.team import Progress, RunResult, Team
 from gmmap.fleet.net.transport import Transport, TransportConfig
 from gmmap.fleet.node.explorer import SIM, TICK_TIMEOUT_S
@@ -158,16 +159,23 @@ class ProcessTeam(Team):
             self.steps[(robot, seq)] = decode_step(payload)
         elif kind in DATA:
             self.heard[robot] += 1
-            start = self.map_to_world[self.names.index(robot)]
-            if kind == "submap":
-                submap = decode(payload)
-                anchor = start @ submap.anchor
-                self.coverage.add_gmm(submap.gmm.transform(anchor))
-                self.anchors[(robot, seq)] = anchor
-            elif kind == "horizons":
-                self.pending[(robot, seq)] = decode_horizons(payload)
-            for key in set(self.pending) & set(self.anchors):
-                self.placed += [h.moved(self.anchors[key]) for h in self.pending.pop(key)]
+            try:
+                self._place(robot, kind, seq, payload)
+            except (DecodeError, FileFormatError) as exc:  # heard: the tick goes on
+                self.log(f"dropping {kind} {seq} of {robot}: {exc}")
+
+    def _place(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
+        """A robot's submap or horizons, placed in the world for coverage."""
+        start = self.map_to_world[self.names.index(robot)]
+        if kind == "submap":
+            submap = decode(payload)
+            anchor = start @ submap.anchor
+            self.coverage.add_gmm(submap.gmm.transform(anchor))
+            self.anchors[(robot, seq)] = anchor
+        elif kind == "horizons":
+            self.pending[(robot, seq)] = decode_horizons(payload)
+        for key in set(self.pending) & set(self.anchors):
+            self.placed += [h.moved(self.anchors[key]) for h in self.pending.pop(key)]
 
 
 def run_processes(

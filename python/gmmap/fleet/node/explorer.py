@@ -99,10 +99,9 @@ class ExplorerNode:
                 self._take(*self.inbox.get(timeout=0.5))
 
     def _take(self, robot: str, kind: str, seq: int, payload: bytes) -> None:
-        if robot == SIM and kind == "tick":
-            self.ticks[seq] = decode_tick(payload)
-            return
         if robot == SIM or kind not in DATA:
+            if robot == SIM and kind == "tick":
+                self._tick(seq, payload)
             return  # other robots' steps, readies
         self.received[robot] += 1
         try:
@@ -117,6 +116,12 @@ class ExplorerNode:
                 self.explorer.receive(SharedSubmap(submap, decode_horizons(parts["horizons"])))
         except (DecodeError, FileFormatError) as exc:  # counted: the tick's wait goes on
             log.warning("%s: dropping %s %d of %s: %s", self.robot, kind, seq, robot, exc)
+
+    def _tick(self, seq: int, payload: bytes) -> None:
+        try:
+            self.ticks[seq] = decode_tick(payload)
+        except DecodeError as exc:
+            log.warning("%s: dropping tick %d: %s", self.robot, seq, exc)
 
     def _step(self, tick: Tick) -> Step:
         if tick.end:

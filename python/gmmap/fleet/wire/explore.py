@@ -6,10 +6,11 @@ Between robots, beside each submap (kind ``submap``, `gmmap.fleet.wire.codec`):
 - ``claim`` (a running count): the robot's position and goal in its map frame, 16 bytes of
   float32 (x, y, goal x, goal y; NaN: no goal).
 
-Between the simulator and each robot, in place of the robot's own sensor and wheels (not
-fleet traffic; JSON, small): ``tick`` (simulator → robots: the time, each robot's true pose
-and how many data messages each had sent by its last step) and ``step`` (robot → simulator:
-its direction of travel, status, and its sent messages and bytes so far).
+Between the simulator and each robot, in place of the robot's wheels and the world its
+sensor sees (not fleet traffic; JSON, small): ``tick`` (simulator → robots: the time, each
+robot's true pose and how many data messages each had sent by its last step) and ``step``
+(robot → simulator: its direction of travel, status, and its sent messages and bytes so
+far). A step that does not decode is a `DecodeError`: the simulator stops the run.
 """
 
 from __future__ import annotations
