@@ -63,11 +63,12 @@ class ProcessTeam(Team):
         return None  # robot i is a process
 
     def run(self, progress: Progress | None = None) -> RunResult:
-        try:
-            self._start(Path(tempfile.mkdtemp(prefix="gmmap-explore-")))
-            return super().run(progress)
-        finally:
-            self._stop()
+        with tempfile.TemporaryDirectory(prefix="gmmap-explore-") as out:  # the robots' configs
+            try:
+                self._start(Path(out))
+                return super().run(progress)
+            finally:
+                self._stop()
 
     def _start(self, out: Path) -> None:
         from gmmap.eval.emulation import launch, robot_config
@@ -86,7 +87,7 @@ class ProcessTeam(Team):
                 "--explore", "--sim-index", str(i), "--config", str(path),
             ]  # fmt: skip
             self.procs.append(launch(cmd, self.log, self.readers))
-        self.log(f"{self.n} robot processes exploring {self.world.name} (fleet {fleet}, {out})")
+        self.log(f"{self.n} robot processes exploring {self.world.name} (fleet {fleet})")
         self._wait(lambda: self.ready >= set(self.names), "every robot ready", START_TIMEOUT_S)
 
     def _stop(self) -> None:

@@ -25,7 +25,7 @@ from gmmap.fleet.wire.codec import encode
 from gmmap.io.sim import DepthCamera, Lidar, World, floor_pose, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
 from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, goal_moved
-from gmmap.mapping.frontier import FreeSpace
+from gmmap.mapping.frontier import FreeSpace, Horizon
 
 MODES = ("shared", "no-sharing", "dense")
 FACING = 0.4  # rad: a depth camera's robot moves only within this of its heading (60° view)
@@ -219,7 +219,7 @@ class Team:
                     other.receive_claim(self.names[i], Claim(after.position, after.goal))
         return direction, agent.status == "exploring"
 
-    def _horizons(self) -> list:
+    def _horizons(self) -> list[Horizon]:
         """The team's horizons in the world frame (the area it knows is free)."""
         horizons = []
         for i, agent in enumerate(self.agents):
