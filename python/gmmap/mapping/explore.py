@@ -74,11 +74,18 @@ class Claim:
     goal: np.ndarray | None
 
 
-def goal_moved(before: np.ndarray | None, after: np.ndarray | None) -> bool:
-    """Whether a robot's goal changed enough (5 cm) to tell its peers again."""
-    if before is None or after is None:
-        return (before is None) != (after is None)
-    return bool(np.linalg.norm(before - after) > 0.05)
+def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
+    """``agent.next_direction(stamp)`` (an `Explorer`, or anything with its ``claim`` and
+    ``next_direction``) and the claim to tell its peers: its new one where its goal moved by
+    more than 5 cm or came or went, else None."""
+    before = agent.claim().goal
+    direction = agent.next_direction(stamp)
+    after = agent.claim()
+    if before is None or after.goal is None:
+        moved = (before is None) != (after.goal is None)
+    else:
+        moved = bool(np.linalg.norm(before - after.goal) > 0.05)
+    return direction, after if moved else None
 
 
 @dataclass

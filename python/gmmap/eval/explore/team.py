@@ -24,7 +24,7 @@ from gmmap.eval.explore.coverage import Coverage
 from gmmap.fleet.wire.codec import encode
 from gmmap.io.sim import DepthCamera, Lidar, World, floor_pose, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
-from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, goal_moved
+from gmmap.mapping.explore import Explorer, SharedSubmap, next_move
 from gmmap.mapping.frontier import FreeSpace, Horizon
 
 MODES = ("shared", "no-sharing", "dense")
@@ -209,14 +209,12 @@ class Team:
         """Robot i's direction of travel in its map frame (None: it stays) and whether it is
         still exploring; a goal it changed goes to its peers as a claim."""
         agent = self.agents[i]
-        before = agent.claim().goal
-        direction = agent.next_direction(EPOCH + t)
-        after = agent.claim()
-        if self.mode != "no-sharing" and goal_moved(before, after.goal):
+        direction, claim = next_move(agent, EPOCH + t)
+        if self.mode != "no-sharing" and claim is not None:
             self.bytes[i] += CLAIM_BYTES
             for j, other in enumerate(self.agents):
                 if j != i:
-                    other.receive_claim(self.names[i], Claim(after.position, after.goal))
+                    other.receive_claim(self.names[i], claim)
         return direction, agent.status == "exploring"
 
     def _horizons(self) -> list[Horizon]:

@@ -32,7 +32,7 @@ from gmmap.fleet.wire.explore import (
     encode_claim,
     encode_json,
 )
-from gmmap.mapping.explore import Explorer, SharedSubmap, goal_moved
+from gmmap.mapping.explore import Explorer, SharedSubmap, next_move
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import decode_horizons, encode_horizons
 
@@ -131,10 +131,8 @@ class ExplorerNode:
         self._send(self.explorer.observe(frame))
         if not tick.decide:
             return Step(None, self.explorer.status, self.sent, self.bytes)
-        before = self.explorer.claim().goal
-        direction = self.explorer.next_direction(frame.stamp)
-        claim = self.explorer.claim()
-        if goal_moved(before, claim.goal):
+        direction, claim = next_move(self.explorer, frame.stamp)
+        if claim is not None:
             self._publish("claim", self.sent, encode_claim(claim))
         moving = None if direction is None else [float(v) for v in direction[:2]]
         return Step(moving, self.explorer.status, self.sent, self.bytes)
