@@ -56,6 +56,16 @@ SETUPS = {
     "lidar360_10hz": {"sensor": "lidar", "rate": 10.0, **HANDHELD},
     "depth": {"sensor": "depth"},
 }
+REAL = {
+    "tum_fr1_xyz_second_session_10hz": (
+        "tum_fr1_xyz",
+        lambda f: {"a": f[0:400], "b": [f[i] for i in range(201, len(f), 3)]},
+    ),
+    "tum_fr3_cabinet_halves": (
+        "tum_fr3_cabinet_keyframes",
+        lambda f: {"a": f[0:35], "b": f[25 : len(f)]},
+    ),
+}
 WRONG = (0.5, 5.0)  # m, degrees: a joined pair's frame error beyond this is a wrong join
 
 
@@ -89,40 +99,44 @@ def case(sessions: dict, config: Config, metres: float) -> dict:
     }
 
 
-def simulated(setup: str, robots: int, seed: int, config: Config) -> dict:
-    options = SimOptions(robots=robots, seed=seed, **SETUPS[setup])
-    run = simulate_options(options)
+def simulated_sessions(setup: str, robots: int, seed: int, config: Config) -> tuple[dict, float]:
+    """Each simulated robot's submaps, and the metres of odometry path of them all."""
+    run = simulate_options(SimOptions(robots=robots, seed=seed, **SETUPS[setup]))
     sessions = {r.name: list(build_submaps(r, r.name, config.build, config.select)) for r in run}
-    return case(sessions, config, sum(path_length(r.odom_poses) for r in run))
+    return sessions, sum(path_length(r.odom_poses) for r in run)
+
+
+def simulated(setup: str, robots: int, seed: int, config: Config) -> dict:
+    sessions, metres = simulated_sessions(setup, robots, seed, config)
+    return case(sessions, config, metres)
 
 
 def real(config: Config) -> dict:
     """Two sessions of one real recording each, split where they overlap: TUM fr1_xyz's first
     400 frames against the recording re-sampled at 10 Hz from frame 201 (a desk), and TUM fr3
     cabinet's keyframes 0-34 against 25-57 (a loop round a box whose sides look alike)."""
-    splits = {
-        "tum_fr1_xyz_second_session_10hz": (
-            "tum_fr1_xyz",
-            lambda f: {"a": f[0:400], "b": [f[i] for i in range(201, len(f), 3)]},
-        ),
-        "tum_fr3_cabinet_halves": (
-            "tum_fr3_cabinet_keyframes",
-            lambda f: {"a": f[0:35], "b": f[25 : len(f)]},
-        ),
-    }
     out: dict = {}
-    for name, (folder, split) in splits.items():
-        if not (DATA / folder).exists():
-            out[name] = {"skipped": f"{DATA / folder} not found"}
-            continue
-        parts = split(datasets.open(DATA / folder))
-        sessions = {
-            robot: list(build_submaps(part, robot, config.build, config.select))
-            for robot, part in parts.items()
-        }
-        metres = sum(path_length(np.array([f.pose for f in part])) for part in parts.values())
-        out[name] = case(sessions, config, metres)
+    for name in REAL:
+        built = real_sessions(name, config)
+        if built is None:
+            out[name] = {"skipped": f"{DATA / REAL[name][0]} not found"}
+        else:
+            out[name] = case(built[0], config, built[1])
     return out
+
+
+def real_sessions(name: str, config: Config) -> tuple[dict, float] | None:
+    """The two sessions of real case ``name`` (`REAL`) and their metres of path; None where
+    its recording is absent."""
+    folder, split = REAL[name]
+    if not (DATA / folder).exists():
+        return None
+    parts = split(datasets.open(DATA / folder))
+    sessions = {
+        robot: list(build_submaps(part, robot, config.build, config.select))
+        for robot, part in parts.items()
+    }
+    return sessions, sum(path_length(np.array([f.pose for f in part])) for part in parts.values())
 
 
 def main() -> None:

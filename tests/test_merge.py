@@ -211,6 +211,7 @@ def test_eval_merge_reports_sessions_against_truth():
     assert report["joined"] and report["precision"] == 1.0
     assert report["frame_t_error"] < 0.05 and report["frame_r_error_deg"] < 2.0
     assert report["floor"]["n"] >= 1 and report["gicp"]["candidates_registered_right"] >= 1
+    assert 0.0 <= report["probability_brier"] < 0.25  # better than a coin on right matches
     no_guess = report["no_guess"]
     assert no_guess["pairs"] >= 1 and no_guess["gmmap"]["right"] >= 1
     baseline = no_guess["kiss_matcher"]

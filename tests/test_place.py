@@ -174,6 +174,28 @@ def test_a_sensed_corridor_end_for_end_is_refused_and_its_right_twin_accepted(se
     assert np.linalg.norm(found[:3, 3] - truth[:3, 3]) < 0.1
 
 
+def test_a_match_free_to_slide_along_a_bare_corridor_is_refused():
+    """Looking down the bare half of the corridor, the depth camera's right alignment is
+    pinned across the corridor but hardly along it: any place along it fits as well, so its
+    `conditioning` stays under the default and the Mapper refuses it. The 360° LiDAR among
+    the shelves sees their ends and the far walls, which pin every direction."""
+    limit = PlaceOptions().min_conditioning
+    pinned = {}
+    lidar = Lidar(beams=32, fov_up=45, fov_down=-45, max_range=30)
+    for sensor, device, xs in (
+        ("depth", DepthCamera.scaled(320, 240, True), np.arange(0.5, 2.01, 0.1)),
+        ("lidar360", lidar, np.arange(4.0, 6.01, 0.25)),
+    ):
+        a = sensed_corridor(device, [(x, 0.0, 0.0) for x in xs], np.eye(4))
+        b = sensed_corridor(device, [(x + 0.2, -0.2, 0.3) for x in xs], yaw_matrix(1.0, (3, 2, 0)))
+        truth = np.linalg.inv(a.gt_anchor) @ b.gt_anchor
+        right = register(b.gmm, a.gmm, truth, options=RegisterOptions())
+        assert right.confidence > 0.8  # the surfaces coincide: C alone would accept it
+        pinned[sensor] = right.conditioning
+    assert pinned["depth"] < limit / 10
+    assert pinned["lidar360"] > limit * 10
+
+
 def test_own_recent_submaps_are_skipped(small_gmm):
     db = PlaceDatabase(options=PlaceOptions(skip_recent=2, max_distance=2.0))
     for seq in range(4):

@@ -161,3 +161,25 @@ def test_a_match_as_good_as_the_robots_own_lookalikes_is_refused() -> None:
     truth = np.linalg.inv(held[4].anchor) @ held[2].anchor
     t, r = pose_errors(unique.registration.transform, truth)
     assert t < 0.05 and r < 1.0, (t, r)
+
+
+def test_a_match_free_to_slide_along_a_bare_corridor_is_refused() -> None:
+    """Two robots see the same stretch of two bare walls over a floor: their mixtures
+    coincide wherever they are slid along it, so the match pins nothing lengthwise and is
+    refused (`PlaceOptions.min_conditioning`); with that test off it is accepted. The same
+    stretch with a cabinet and a closed end (`room`) is pinned and kept."""
+    rng = np.random.default_rng(2)
+    b_frame = pose(40, (2.0, 1.0, 0.0))
+    # Only this test decides here: the corridor is the same from either end.
+    options = PlaceOptions(max_distance=2.0, max_ambiguity=1.0, skip_recent=0, max_turned=None)
+    for scene, kept in ((corridor, False), (room, True)):
+        held = [
+            submap("a", 0, np.eye(4), scene(rng)),
+            submap("b", 0, np.linalg.inv(b_frame), scene(rng)),
+        ]
+        (match,) = Mapper(Config(place=options)).add(held)
+        assert match.registration.confidence > 0.8
+        assert (match.registration.conditioning >= options.min_conditioning) == kept
+        assert match.accepted == kept
+        (free,) = Mapper(Config(place=replace(options, min_conditioning=0.0))).add(held)
+        assert free.accepted

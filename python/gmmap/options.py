@@ -201,30 +201,34 @@ class PlaceOptions:
     query by construction).
 
     C_thr 0.55 with ``max_ambiguity`` 0.7: true cross-session matches of one desk (fr1_xyz
-    against itself re-sampled at 10 Hz) score C 0.58-0.91 with the best other basin at 0.3-0.4
-    of C, so C_thr 0.75 keeps a third of them. A match alone does not join two maps: in the
-    simulated office corridor views turned 180° score as high (C up to 0.87), which is why the
-    join needs several consistent matches (`BackendOptions.min_matches`) and why a query whose
-    candidates put it at two places of one map is rejected (``max_conflict``).
+    against itself at 10 Hz) score C 0.58-0.91, the best other basin 0.3-0.4 of C. A match
+    alone does not join two maps: simulated corridor views turned 180° score as high (C up to
+    0.87), hence `BackendOptions.min_matches` and ``max_conflict`` (a query that candidates
+    put at two places of one map is rejected).
 
-    ``max_turned`` 0.9: each accepted match's half-turned twin is probed (`place.turned`).
-    On the simulated office (3 robots, seeds 0-2, `gmmap eval merge`) it refuses 5 of the 20
-    wrong verified matches of the 10 Hz 360° LiDAR (precision 0.73 → 0.79) and one each of
-    the 16-beam and 2 Hz LiDAR (0.92 → 0.93, 0.91 → 0.93), at the cost of one right match
-    (2 Hz); every robot pair still joins, and TUM fr1_xyz's sessions verify the same 10 right
-    matches. Right matches in those corridors turn into twins of 0.75-0.87 C, wrong flips'
-    twins (their right alignment) 0.9-0.95 C: a lower limit refuses right ones.
+    ``max_turned`` 0.9: each accepted match's half-turned twin is probed (`place.turned`); on
+    the simulated office's LiDARs (3 robots, seeds 0-2) it refused 7 wrong verified matches
+    and 1 right one. Right matches in those corridors turn into twins of 0.75-0.87 C, wrong
+    flips' twins (their right alignment) 0.9-0.95 C: a lower limit refuses right ones.
 
     ``refine_neighbours``: an accepted match's pose is refined against the candidate and its
     robot's held submaps up to this many sequence numbers away, as one mixture in the
-    candidate's frame (a submap-to-local-map step). One submap's mixture pins rotation poorly
-    where the overlap is partial: on fr1_xyz against its 10 Hz second session and on the fr1
-    halves, 3 of 135 verified matches end 3.7-5.9° off, none after refining over ±2, and the
-    median error falls from 2.5 cm / 1.0° to 1.8 cm / 0.8°. 0: no refinement. A match the
-    refinement moves more than ``max_refine_shift`` m is rejected: the candidate's
-    surroundings disagree with it. Right matches move at most 9 cm there (2.3 cm in the
-    simulator); fr3 cabinet's loop, a box whose sides look alike, verifies one match 0.57 m /
-    27° off, which moves 0.28 m.
+    candidate's frame (submap to local map). One submap pins rotation poorly where the overlap
+    is partial: on fr1_xyz's sessions and halves 3 of 135 verified matches end 3.7-5.9° off,
+    none after refining over ±2 (median 2.5 cm / 1.0° → 1.8 cm / 0.8°). 0: no refinement. A
+    match the refinement moves more than ``max_refine_shift`` m is rejected: right ones move
+    at most 9 cm there (2.3 cm simulated), fr3 cabinet's 0.57 m / 27° wrong one 0.28 m.
+
+    ``min_conditioning`` 0.004: a match must pin its freest direction of translation, after
+    refinement, at least this fraction as firmly as its firmest (`Registration.conditioning`):
+    two bare corridors coincide at any offset along them. Simulated office, 3 robots: wrong
+    verified matches 0.00001-0.004, right ones 0.003-0.06; TUM fr1_xyz's 0.005-0.05. Chosen
+    on seeds 0-2; on seeds 3-4 it refuses all 15 wrong verified matches and 1 of 82 right.
+
+    ``min_probability`` null: matches carry their probability of being right
+    (`Match.probability`, `gmmap.mapping.calibration`) but none is refused on it: on matches
+    the shipped calibration never saw (benchmarks/calibration.py) 0.5 refuses 3 more wrong
+    matches and 5 right ones, 3 of them TUM's real ones, which it undervalues.
     """
 
     # "shape": the training-free D2 descriptor; "learned": PointNetVLAD
@@ -258,6 +262,11 @@ class PlaceOptions:
     # Refuse a match whose alignment, turned half round about the query's centre and refined,
     # scores at least this·C (`place.turned`: a corridor end for end); null: no such test.
     max_turned: float | None = 0.9  #: Refuse if the half-turned match scores this·C; null: off
+    min_conditioning: float = 0.004  #: Refuse a match pinned this loosely in some direction; 0: off
+    # Refuse a match whose calibrated probability of being right (`gmmap.mapping.calibration`)
+    # is under this, or unknown (unlike anything it was fitted on); null: reported only.
+    min_probability: float | None = None  #: Refuse a match less likely right than this; null: off
+    calibration: str | None = None  #: The calibration's JSON; null: the one shipped with gmmap
 
     def __post_init__(self) -> None:
         if (
@@ -284,6 +293,12 @@ class PlaceOptions:
             raise InvalidInputError(f"max_turned must be > 0 or null, got {self.max_turned}")
         if not 0 < self.max_ambiguity <= 1:
             raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
+        least = self.min_probability
+        if not 0 <= self.min_conditioning < 1 or not (least is None or 0 <= least <= 1):
+            raise InvalidInputError(
+                f"min_conditioning in [0, 1) and min_probability in [0, 1] or null, got "
+                f"{self.min_conditioning} and {least}"
+            )
         if not (self.max_conflict > 0 and self.conflict_distance > 0 and self.conflict_angle > 0):
             raise InvalidInputError("max_conflict, conflict_distance, conflict_angle must be > 0")
 

@@ -13,7 +13,9 @@ otherwise), then, from the outside:
   two submaps are a positive (views overlapping at the truth, `gmmap.eval.place.positives`) and
   its transform is within 0.2 m and 3° of the truth; recall counts over every positive pair of
   the sessions, found by place recognition or not; ``kept_precision``: the same over the
-  matches the backend kept (those that shape the merged map);
+  matches the backend kept (those that shape the merged map); ``probability_brier``: the
+  mean squared gap between each probability-scored match's `Match.probability` and whether
+  it is right (`gmmap.mapping.calibration`; 0 is perfect, None when none was scored);
 - ``gicp``: the points + GICP verification (small_gicp, the same yaw starts) on the same
   candidates: how many it registers correctly, and its recall at 100 % precision when its
   inlier fraction is the score;
@@ -104,11 +106,15 @@ def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index
     accepted = [m.accepted for m in matches]
     n_positive = int(pos.sum() // 2)
     correct_accepted = sum(r and a for r, a in zip(right, accepted, strict=True))
+    scored = [
+        (m.probability, r) for m, r in zip(matches, right, strict=True) if m.probability is not None
+    ]
     return {
         "verified": sum(accepted),
         "precision": correct_accepted / sum(accepted) if any(accepted) else None,
         "recall": correct_accepted / n_positive if n_positive else None,
         "candidates_registered_right": sum(right),
+        "probability_brier": float(np.mean([(p - r) ** 2 for p, r in scored])) if scored else None,
     }
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
+from gmmap.mapping.calibration import Calibration, features
 from gmmap.mapping.confusion import confusion
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
 from gmmap.mapping.place import (
@@ -60,6 +61,7 @@ class Mapper:
             registration=self.config.register,
         )
         self.graph = PoseGraph(self.config.backend)
+        self.calibration = Calibration.load(self.config.place.calibration)
         self.submaps: dict[Node, Submap] = {}
         self.matches: list[Match] = []  # every pair judged here, accepted or not, in order
         self.edge_matches: dict[int, Match] = {}  # backend edge id → the match it came from
@@ -108,7 +110,8 @@ class Mapper:
             judged = distinct(judged, anchors, self.config.place)
             judged = [self._unconfused(m) if m.accepted else m for m in judged]
             judged = [self._untwinned(s, m) if m.accepted else m for m in judged]
-            matches.extend(self._refined(s, m) if m.accepted else m for m in judged)
+            judged = [self._refined(s, m) if m.accepted else m for m in judged]
+            matches.extend(self._calibrated(self._pinned(m)) if m.accepted else m for m in judged)
             if progress and ((i + 1) % 10 == 0 or i + 1 == len(submaps)):
                 accepted = sum(m.accepted for m in matches)
                 progress(f"place recognition: {i + 1}/{len(submaps)} submaps, {accepted} verified")
@@ -192,6 +195,23 @@ class Mapper:
             time_s=m.registration.time_s + r.time_s,
         )
         return replace(m, registration=refined)
+
+    def _pinned(self, m: Match) -> Match:
+        """``m`` refused when its alignment leaves a direction nearly free: its translation
+        information's `Registration.conditioning` under ``min_conditioning``. Two corridors
+        that coincide anywhere along their length coincide at a wrong place as well as a
+        right one."""
+        if m.registration.conditioning >= self.config.place.min_conditioning:
+            return m
+        return replace(m, accepted=False)
+
+    def _calibrated(self, m: Match) -> Match:
+        """``m`` with its `Match.probability`, refused under ``min_probability`` (when set) or
+        where the calibration never saw its like."""
+        p = self.calibration.probability(features(m))
+        floor = self.config.place.min_probability
+        refused = floor is not None and (p is None or p < floor)
+        return replace(m, probability=p, accepted=m.accepted and not refused)
 
     @staticmethod
     def _keys(matches: Sequence[Match]) -> set[Node]:

@@ -54,6 +54,14 @@ class Registration:
     # away), 0 if none. Close to ``confidence``: ambiguous geometry (a corridor end for end).
     alternative_confidence: float = 0.0
 
+    @property
+    def conditioning(self) -> float:
+        """The smallest eigenvalue of the translation block of ``information`` over its
+        largest: near 0 where the alignment could slide along some direction unseen (a plain
+        corridor's length), near 1 where every direction is pinned alike."""
+        eig = np.linalg.eigvalsh(self.information[3:, 3:])
+        return float(max(eig[0], 0.0) / eig[-1]) if eig[-1] > 0 else 0.0
+
 
 def register(
     source: Gmm,
