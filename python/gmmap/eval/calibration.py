@@ -22,7 +22,7 @@ from scipy.optimize import minimize
 
 from gmmap.config import Config
 from gmmap.eval.merge import merge
-from gmmap.eval.place import is_correct, positives
+from gmmap.eval.sessions import is_right, truth_of
 from gmmap.mapping.calibration import FEATURES, SIGNS, Calibration, features
 from gmmap.mapping.submap import Submap
 
@@ -37,21 +37,10 @@ def labelled(
     config = config or Config()
     place = replace(config.place, min_conditioning=0.0, min_probability=None)
     mapper, _ = merge(sessions, replace(config, place=place))
-    held = {(s.robot, s.seq): s for subs in sessions.values() for s in subs}
-    order = list(held)
-    index = {k: i for i, k in enumerate(order)}
-    pos = positives([held[k] for k in order])
-    X, y = [], []
-    for m in mapper.matches:
-        if not m.accepted:
-            continue
-        key = (m.candidate.robot, m.candidate.seq)
-        right = pos[index[m.query], index[key]] and is_correct(
-            m.registration.transform, held[m.query], held[key]
-        )
-        X.append(features(m))
-        y.append(bool(right))
-    return np.reshape(X, (-1, len(FEATURES))), np.array(y, dtype=bool)
+    held, pos, index = truth_of(sessions)
+    verified = [m for m in mapper.matches if m.accepted]
+    X = np.reshape([features(m) for m in verified], (-1, len(FEATURES)))
+    return X, np.array([is_right(m, held, pos, index) for m in verified], dtype=bool)
 
 
 def fit(cases: Sequence[tuple[np.ndarray, np.ndarray]], source: str = "") -> Calibration:

@@ -50,10 +50,8 @@ def evaluate_sessions(
 ) -> dict:
     """The report described in the module docstring, plus the merge's own report."""
     mapper, report = merge(sessions, config, progress)
-    held = {(s.robot, s.seq): s for subs in sessions.values() for s in subs}
+    held, pos, index = truth_of(sessions)
     order = list(held)
-    pos = positives([held[k] for k in order])
-    index = {k: i for i, k in enumerate(order)}
     pairs = [p for p in report.get("pairs", []) if p["frame_t_error"] is not None]
     joined = len(report["groups"]) == 1
     out = {
@@ -95,14 +93,24 @@ def _positive(m: Match, pos: np.ndarray, index: Mapping) -> bool:
     return bool(pos[index[m.query], index[(m.candidate.robot, m.candidate.seq)]])
 
 
-def _right(m: Match, held: Mapping, pos: np.ndarray, index: Mapping) -> bool:
+def truth_of(
+    sessions: Mapping[str, Sequence[Submap]],
+) -> tuple[dict[tuple[str, int], Submap], np.ndarray, dict[tuple[str, int], int]]:
+    """Every submap by (robot, seq), the positive pairs among them in that order
+    (`gmmap.eval.place.positives`), and each one's row there."""
+    held = {(s.robot, s.seq): s for subs in sessions.values() for s in subs}
+    pos = positives(list(held.values()))
+    return held, pos, {k: i for i, k in enumerate(held)}
+
+
+def is_right(m: Match, held: Mapping, pos: np.ndarray, index: Mapping) -> bool:
     """A positive pair registered within `is_correct`'s tolerance of the truth."""
     return _positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
 
 
 def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping) -> dict:
     """Precision and recall of the accepted matches, and how many candidates registered right."""
-    right = [_right(m, held, pos, index) for m in matches]
+    right = [is_right(m, held, pos, index) for m in matches]
     accepted = [m.accepted for m in matches]
     n_positive = int(pos.sum() // 2)
     correct_accepted = sum(r and a for r, a in zip(right, accepted, strict=True))
@@ -121,7 +129,7 @@ def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index
 def kept_precision(mapper, held: Mapping, pos: np.ndarray, index: Mapping) -> float | None:
     """The share of the backend's kept matches that are correct (None when it kept none)."""
     kept = [mapper.edge_matches[e] for e in (mapper.result.accepted if mapper.result else [])]
-    right = [_right(m, held, pos, index) for m in kept]
+    right = [is_right(m, held, pos, index) for m in kept]
     return sum(right) / len(right) if right else None
 
 

@@ -21,6 +21,7 @@ the like of: `probability` says None, and a Mapper that asks for a probability r
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass
@@ -86,12 +87,15 @@ class Calibration:
 
     @staticmethod
     def load(path: str | Path | None = None) -> Calibration:
-        """The calibration at ``path`` (None: the one shipped with gmmap)."""
-        path = Path(path) if path is not None else SHIPPED
-        try:
-            raw = json.loads(path.read_text())
-            return Calibration(
-                **{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()}
-            )
-        except (OSError, ValueError, TypeError) as err:
-            raise InvalidInputError(f"cannot read the calibration {path}: {err}") from None
+        """The calibration at ``path`` (None: the one shipped with gmmap), read once per
+        path: every `Mapper` built (a fresh one per `Mapper.rejudged`) asks for it."""
+        return _read(Path(path) if path is not None else SHIPPED)
+
+
+@functools.lru_cache(maxsize=8)
+def _read(path: Path) -> Calibration:
+    try:
+        raw = json.loads(path.read_text())
+        return Calibration(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})
+    except (OSError, ValueError, TypeError) as err:
+        raise InvalidInputError(f"cannot read the calibration {path}: {err}") from None
