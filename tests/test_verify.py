@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gmmap.config import Config
+from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import evaluate_registration, pose_errors
 from gmmap.io.datasets import BUNDLED_TUM_SLICE
 from gmmap.io.datasets.tum import TumRgbd
@@ -49,8 +50,8 @@ def fit(points: np.ndarray) -> Gmm:
     return fit_gmm(points, 100, covariance="full", seed=0)
 
 
-def verify(query: Gmm, target: Gmm):
-    db = PlaceDatabase()
+def verify(query: Gmm, target: Gmm, options: PlaceOptions | None = None):
+    db = PlaceDatabase(options=options or PlaceOptions())
     db.add("b", 0, target)
     return db.verify("a", 0, query, Candidate("b", 0, 0.0))
 
@@ -65,12 +66,30 @@ def test_a_partial_overlap_is_verified_and_a_flipped_corridor_is_not() -> None:
     t, r = pose_errors(m.registration.transform, np.linalg.inv(b.gt_anchor) @ a.gt_anchor)
     assert m.accepted and t < 0.05 and r < 2.0, (m.registration.confidence, t, r)
     # A corridor and the same corridor seen from its other end: two alignments explain it
-    # equally well (the right one and the 180° flip), so neither is verified.
+    # equally well (the right one and the 180° flip). Under sure_confidence the close second
+    # basin refuses it; here C is 1, and the half-turned twin and the slide test refuse it.
     rng = np.random.default_rng(0)
     hall = corridor(rng)
     flipped = hall @ pose(180, (6.0, 0.0, 0.0))[:3, :3].T + (6.0, 0.0, 0.0)
-    m = verify(fit(hall), fit(flipped))
+    m = verify(fit(hall), fit(flipped), PlaceOptions(sure_confidence=None))
     assert not m.accepted, (m.registration.confidence, m.registration.alternative_confidence)
+    held = [submap("a", 0, np.eye(4), hall), submap("b", 0, np.eye(4), flipped)]
+    options = PlaceOptions(max_distance=2.0, skip_recent=0)
+    (m,) = Mapper(Config(place=options)).add(held)
+    assert m.registration.confidence >= options.sure_confidence and not m.accepted
+
+
+def test_a_sure_match_is_not_held_back_by_a_close_second_basin() -> None:
+    """Alike rooms leave a right 360° LiDAR match a second basin near its C: from
+    ``sure_confidence`` on, C alone is the score (`Mapper`'s twin, chance and slide tests
+    still follow); under it, and with it off, the close second holds the match back."""
+    reg = Registration(np.eye(4), 0.9, np.eye(6), 1, 0.0, alternative_confidence=0.85)
+    least = PlaceOptions().min_confidence
+    assert PlaceDatabase().score(reg) == 0.9
+    assert PlaceDatabase(options=PlaceOptions(sure_confidence=None)).score(reg) < least
+    assert PlaceDatabase().score(replace(reg, confidence=0.8, alternative_confidence=0.75)) < least
+    with pytest.raises(InvalidInputError, match="sure_confidence"):
+        PlaceOptions(sure_confidence=1.5)
 
 
 def test_a_fast_rotation_pair_registers_from_the_identity_within_gicps_error(shared_data):

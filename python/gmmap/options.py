@@ -143,15 +143,8 @@ class RegisterOptions:
     measurement). ``confidence_scale``: the widening under which C is measured, so that it
     reflects shared geometry rather than how sharply each side was fitted.
 
-    ``start_offset`` and ``refine_starts`` widen the global search (off by default). On the
-    simulated office (3 robots, seeds 0-2, `gmmap eval merge` defaults otherwise), 1.5 m and 4
-    raise verified precision from 0.90-0.94 to 0.95-1.0 on the 16-beam LiDAR and from
-    0.64-0.83 to 0.84-0.85 on the 10 Hz 360° LiDAR (more corridor flips meet their right
-    twin as the alternative), and no-guess registration of overlapping pairs from 125 to 154
-    of 352 right (10 Hz, seed 2) and 40 to 60 of 120 (16-beam, seed 0), at 3-4 times the
-    time. They stay off: on the 2 Hz 360° LiDAR, seed 0, one robot pair no longer joins with 4
-    (it holds 2 consistent matches, not ``BackendOptions.min_matches``), and with 3 one pair
-    joins 5.1° off; the depth camera joins nothing either way.
+    ``start_offset`` and ``refine_starts`` widen the global search; they stay off
+    (docs/guide/merging.md, "Which sensors join", says what they gain and cost).
     """
 
     #: From a guess: std devs (m) added to every covariance, coarse to fine
@@ -206,10 +199,15 @@ class PlaceOptions:
     0.87), hence `BackendOptions.min_matches` and ``max_conflict`` (a query that candidates
     put at two places of one map is rejected).
 
+    ``sure_confidence`` 0.85: from this C on, ``max_ambiguity`` is waived (the other tests
+    stay). 360° LiDAR scans of the simulated office's alike rooms leave right matches a second
+    basin at 0.8 of C, and wrong candidates score C 0.87 at most (3 robots, seeds 0-2): recall
+    at 2 Hz 0.035 → 0.060, at 10 Hz 0.050 → 0.077, precision ≥ 0.98; 0.80-0.82 let enough
+    wrong ones through to hold 2 of 9 robot pairs back.
+
     ``max_turned`` 0.9: each accepted match's half-turned twin is probed (`place.turned`); on
-    the simulated office's LiDARs (3 robots, seeds 0-2) it refused 7 wrong verified matches
-    and 1 right one. Right matches in those corridors turn into twins of 0.75-0.87 C, wrong
-    flips' twins (their right alignment) 0.9-0.95 C: a lower limit refuses right ones.
+    the simulated LiDARs it refused 7 wrong verified matches and 1 right one (right twins
+    0.75-0.87 C, wrong flips' twins 0.9-0.95 C: a lower limit refuses right ones).
 
     ``refine_neighbours``: an accepted match's pose is refined against the candidate and its
     robot's held submaps up to this many sequence numbers away, as one mixture in the
@@ -225,10 +223,9 @@ class PlaceOptions:
     verified matches 0.00001-0.004, right ones 0.003-0.06; TUM fr1_xyz's 0.005-0.05. Chosen
     on seeds 0-2; on seeds 3-4 it refuses all 15 wrong verified matches and 1 of 82 right.
 
-    ``min_probability`` null: matches carry their probability of being right
-    (`Match.probability`, `gmmap.mapping.calibration`) but none is refused on it: on matches
-    the shipped calibration never saw (benchmarks/calibration.py) 0.5 refuses 3 more wrong
-    matches and 5 right ones, 3 of them TUM's real ones, which it undervalues.
+    ``min_probability`` null: every match carries `Match.probability` (`gmmap.mapping
+    .calibration`), none is refused on it: held out (benchmarks/calibration.py), 0.5 refuses 3
+    more wrong matches and 5 right ones, 3 of them TUM's real ones, which it undervalues.
     """
 
     # "shape": the training-free D2 descriptor; "learned": PointNetVLAD
@@ -243,6 +240,7 @@ class PlaceOptions:
     # Reject when another basin scores this close to the best (alternative / confidence):
     # the geometry is ambiguous, e.g. a corridor seen end for end.
     max_ambiguity: float = 0.7  #: Score falls to 0 as the best other basin rises from this·C to C
+    sure_confidence: float | None = 0.85  #: From this C on, max_ambiguity is waived; null: never
     # Reject when another verified candidate of the same query, in the same robot's map but
     # more than conflict_distance m or conflict_angle degrees away, scores this close
     # (`place.distinct`).
@@ -291,8 +289,12 @@ class PlaceOptions:
             math.isfinite(self.max_turned) and self.max_turned > 0
         ):
             raise InvalidInputError(f"max_turned must be > 0 or null, got {self.max_turned}")
-        if not 0 < self.max_ambiguity <= 1:
-            raise InvalidInputError(f"max_ambiguity in (0, 1], got {self.max_ambiguity}")
+        sure = self.sure_confidence
+        if not 0 < self.max_ambiguity <= 1 or not (sure is None or 0 < sure <= 1):
+            raise InvalidInputError(
+                f"max_ambiguity in (0, 1], sure_confidence in (0, 1] or null, got "
+                f"{self.max_ambiguity} and {sure}"
+            )
         least = self.min_probability
         if not 0 <= self.min_conditioning < 1 or not (least is None or 0 <= least <= 1):
             raise InvalidInputError(
@@ -434,9 +436,7 @@ class ExploreOptions:
 
     bins: int = 72  #: Directions per free-space horizon (72: every 5°, one byte each)
     horizon_spacing: float = 1.0  #: Metres of path between two horizons' viewpoints
-    link_radius: float = (
-        2.5  #: Viewpoints this close join the route graph if the line between is known free
-    )
+    link_radius: float = 2.5  #: Viewpoints this close join the route graph if known free between
     #: Frontier points (open ones first) a cluster needs to be a goal while a larger one is left
     min_frontier: int = 3
     claim_radius: float = 2.0  #: A frontier this close to a peer's goal is left to the peer

@@ -333,9 +333,13 @@ class PlaceDatabase:
 
     def score(self, reg: Registration) -> float:
         """The confidence C, scaled down to 0 as the best other basin's confidence rises from
-        ``max_ambiguity``·C to C (a corridor seen end for end scores near 0)."""
+        ``max_ambiguity``·C to C (a corridor seen end for end scores near 0); from
+        ``sure_confidence`` on, C itself (alike rooms leave right matches a close second)."""
         if reg.confidence <= 0:
             return 0.0
+        sure = self.options.sure_confidence
+        if sure is not None and reg.confidence >= sure:
+            return reg.confidence
         ratio = reg.alternative_confidence / reg.confidence
         margin = 1.0 - self.options.max_ambiguity
         return reg.confidence * (min(1.0, (1.0 - ratio) / margin) if margin > 0 else 1.0)
