@@ -91,6 +91,7 @@ def case(sessions: dict, config: Config, metres: float) -> dict:
         "joined": len(joined) - len(wrong),
         "wrong": len(wrong),
         **{k: r[k] for k in ("positives", "candidates", "verified", "precision", "recall")},
+        "registered_right": r["candidates_registered_right"],
         "gicp": r["gicp"],
         "no_guess": r["no_guess"],
         "bytes_median": float(np.median(sizes)),
@@ -161,9 +162,12 @@ def main() -> None:
 
 def totals(runs: list[dict]) -> dict:
     """Sums over the seeds, and the verified precision over all of them."""
-    total = {k: sum(r[k] for r in runs) for k in ("pairs", "met", "joined", "wrong", "verified")}
+    keys = ("pairs", "met", "joined", "wrong", "positives", "verified", "registered_right")
+    total = {k: sum(r[k] for r in runs) for k in keys}
+    total["gicp_registered_right"] = sum(r["gicp"]["candidates_registered_right"] for r in runs)
     right = sum(round((r["precision"] or 0) * r["verified"]) for r in runs)
     total["precision"] = right / total["verified"] if total["verified"] else None
+    total["recall"] = right / total["positives"] if total["positives"] else None
     pairs = sum(r["no_guess"]["pairs"] for r in runs)
     for method in ("gmmap", "kiss_matcher"):
         done = [r["no_guess"][method] for r in runs if "right" in r["no_guess"][method]]
