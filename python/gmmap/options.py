@@ -225,7 +225,7 @@ class PlaceOptions:
 
     ``min_probability`` null: every match carries `Match.probability` (`gmmap.mapping
     .calibration`), none is refused on it: held out (benchmarks/calibration.py), 0.5 refuses 3
-    more wrong matches and 5 right ones, 3 of them TUM's real ones, which it undervalues.
+    more wrong matches and 4 right ones, 2 of them TUM's real ones, which it undervalues.
     """
 
     # "shape": the training-free D2 descriptor; "learned": PointNetVLAD
