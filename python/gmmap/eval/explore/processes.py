@@ -58,6 +58,7 @@ class ProcessTeam(Team):
         self.pending: dict[tuple[str, int], list[Horizon]] = {}
         self.placed: list[Horizon] = []
         self.seq, self.t = 0, 0.0
+        self.ending = False  # the last tick is out: a robot that answered it may have left
 
     def _agent(self, i: int) -> None:
         return None  # robot i is a process
@@ -108,6 +109,7 @@ class ProcessTeam(Team):
         return [self._move(i, t, dt, spin) for i in range(self.n)]
 
     def _finish(self) -> list[str]:
+        self.ending = True
         self._exchange(Tick(self.t, self._poses(), dict(self.sent), end=True))
         deadline = time.monotonic() + EXIT_TIMEOUT_S
         codes = [p.wait(timeout=max(deadline - time.monotonic(), 0.1)) for p in self.procs]
@@ -144,7 +146,7 @@ class ProcessTeam(Team):
         deadline = time.monotonic() + timeout
         while not done():
             codes = [p.poll() for p in self.procs]
-            if any(c is not None for c in codes):
+            if any(c is not None and (c != 0 or not self.ending) for c in codes):
                 raise RuntimeError(f"a robot process ended ({codes}) before {what}")
             if time.monotonic() > deadline:
                 raise TimeoutError(f"no {what} in {timeout:.0f} s")
