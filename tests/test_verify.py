@@ -66,8 +66,9 @@ def test_a_partial_overlap_is_verified_and_a_flipped_corridor_is_not() -> None:
     t, r = pose_errors(m.registration.transform, np.linalg.inv(b.gt_anchor) @ a.gt_anchor)
     assert m.accepted and t < 0.05 and r < 2.0, (m.registration.confidence, t, r)
     # A corridor and the same corridor seen from its other end: two alignments explain it
-    # equally well (the right one and the 180° flip). Under sure_confidence the close second
-    # basin refuses it; here C is 1, and the half-turned twin and the slide test refuse it.
+    # equally well (the right one and the 180° flip). With sure_confidence off the close
+    # second basin refuses it; with it on (C is 1 here) the half-turned twin and the slide
+    # test refuse it.
     rng = np.random.default_rng(0)
     hall = corridor(rng)
     flipped = hall @ pose(180, (6.0, 0.0, 0.0))[:3, :3].T + (6.0, 0.0, 0.0)
