@@ -200,10 +200,12 @@ class PlaceOptions:
     put at two places of one map is rejected).
 
     ``sure_confidence`` 0.85: from this C on, ``max_ambiguity`` is waived (the other tests
-    stay). 360° LiDAR scans of the simulated office's alike rooms leave right matches a second
-    basin at 0.8 of C, and wrong candidates score C 0.87 at most (3 robots, seeds 0-2): recall
-    at 2 Hz 0.035 → 0.060, at 10 Hz 0.050 → 0.077, precision ≥ 0.98; 0.80-0.82 let enough
-    wrong ones through to hold 2 of 9 robot pairs back.
+    stay): 360° LiDAR scans of alike rooms leave right matches a second basin at 0.8 of C,
+    wrong ones score C 0.87 at most (simulated office; docs/guide/merging.md).
+
+    ``max_seen_through`` 0.02: where both submaps come with horizons (exploring robots), a
+    match may put at most this share of either's surfaces where the other's rays went
+    through; random-office:101: right matches ≤ 0.009, wrong ≥ 0.025 but one (explore.md).
 
     ``max_turned`` 0.9: each accepted match's half-turned twin is probed (`place.turned`); on
     the simulated LiDARs it refused 7 wrong verified matches and 1 right one (right twins
@@ -241,9 +243,7 @@ class PlaceOptions:
     # the geometry is ambiguous, e.g. a corridor seen end for end.
     max_ambiguity: float = 0.7  #: Score falls to 0 as the best other basin rises from this·C to C
     sure_confidence: float | None = 0.85  #: From this C on, max_ambiguity is waived; null: never
-    # Reject when another verified candidate of the same query, in the same robot's map but
-    # more than conflict_distance m or conflict_angle degrees away, scores this close
-    # (`place.distinct`).
+    # Another verified candidate of the query, elsewhere in that robot's map (`place.distinct`).
     max_conflict: float = 0.8  #: Reject if a candidate elsewhere in that map verifies this close
     conflict_distance: float = 1.0  #: Elsewhere, for max_conflict: more than this far (m)
     conflict_angle: float = 10.0  #: ... or turned more than this (degrees)
@@ -252,17 +252,14 @@ class PlaceOptions:
     use_yaw_hint: bool = False  #: Verify from the descriptor's yaw instead of the full yaw search
     refine_neighbours: int = 2  #: Refine a match over the candidate robot's submaps ±this; 0: off
     max_refine_shift: float = 0.15  #: Reject a match the refinement moves more than this (m)
-    # Refuse a match unless both submaps' confusion (`gmmap.mapping.confusion`: the best C
-    # each reaches against its own robot's submaps that odometry puts apart, over up to
-    # confusion_probes of them) stays under max_confusion·C. 0 probes: no such test.
+    # `gmmap.mapping.confusion`: the best C each submap reaches against its own robot's
+    # submaps that odometry puts apart (up to confusion_probes of them).
     max_confusion: float = 0.85  #: Refuse a match unless both submaps' confusion stays under this·C
     confusion_probes: int = 3  #: Own distant submaps confusion is measured against; 0: no test
-    # Refuse a match whose alignment, turned half round about the query's centre and refined,
-    # scores at least this·C (`place.turned`: a corridor end for end); null: no such test.
     max_turned: float | None = 0.9  #: Refuse if the half-turned match scores this·C; null: off
     min_conditioning: float = 0.004  #: Refuse a match pinned this loosely in some direction; 0: off
-    # Refuse a match whose calibrated probability of being right (`gmmap.mapping.calibration`)
-    # is under this, or unknown (unlike anything it was fitted on); null: reported only.
+    max_seen_through: float | None = 0.02  #: Refuse if this share of surfaces meets seen free space
+    # Refuse a match less likely right (`gmmap.mapping.calibration`) or unknown; null: off
     min_probability: float | None = None  #: Refuse a match less likely right than this; null: off
     calibration: str | None = None  #: The calibration's JSON; null: the one shipped with gmmap
 
@@ -295,11 +292,13 @@ class PlaceOptions:
                 f"max_ambiguity in (0, 1], sure_confidence in (0, 1] or null, got "
                 f"{self.max_ambiguity} and {sure}"
             )
-        least = self.min_probability
-        if not 0 <= self.min_conditioning < 1 or not (least is None or 0 <= least <= 1):
+        least, seen = self.min_probability, self.max_seen_through
+        if not 0 <= self.min_conditioning < 1 or not all(
+            v is None or 0 <= v <= 1 for v in (least, seen)
+        ):
             raise InvalidInputError(
-                f"min_conditioning in [0, 1) and min_probability in [0, 1] or null, got "
-                f"{self.min_conditioning} and {least}"
+                f"min_conditioning in [0, 1), min_probability and max_seen_through in [0, 1] "
+                f"or null, got {self.min_conditioning}, {least} and {seen}"
             )
         if not (self.max_conflict > 0 and self.conflict_distance > 0 and self.conflict_angle > 0):
             raise InvalidInputError("max_conflict, conflict_distance, conflict_angle must be > 0")

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from gmmap.errors import FileFormatError, InvalidInputError
@@ -38,6 +38,7 @@ RANGE_STEP = 0.1  # metres per range unit on the wire
 BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot stood there
 MAX_CODE = 255
 BACK = 0.4  # metres a frontier's target lies inside the horizon that sees it
+SEEN_MARGIN = 0.2  # metres inside a horizon a surface must lie to contradict it
 BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
@@ -125,6 +126,72 @@ def clear_lines(space, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     t = np.linspace(0, 1, steps)
     pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, a.shape[1])
     return space.contains(pts, shrink=0.1).reshape(len(a), steps).all(axis=1)
+
+
+def reach(
+    space, edges: list, position: np.ndarray, latest: int | None, link: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Route lengths from ``position`` to every viewpoint of ``space`` over the graph of
+    ``edges`` between them, and the predecessors (``position`` is the last node, the start):
+    it links to the viewpoints within ``link`` m with a known free line and to ``latest`` (the
+    one it is at or just left)."""
+    n = start = len(space)
+    edges = list(edges)
+    near = np.array(cKDTree(space.origins).query_ball_point(position, link), int)
+    if len(near):
+        # From just off the robot: it stands where it stands, even inside a margin.
+        off = position + 0.3 * unit(space.origins[near] - position)
+        edges += [(start, int(i)) for i in near[clear_lines(space, off, space.origins[near])]]
+    if latest is not None:
+        edges.append((start, latest))
+    e = np.array(edges, dtype=int).reshape(-1, 2)
+    pts = np.vstack([space.origins, position[None]])
+    w = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1) + 1e-6
+    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n + 1, n + 1)).tocsr()
+    dist, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
+    return dist, pred, start
+
+
+def route_costs(
+    space, legs: np.ndarray, goals: np.ndarray, position: np.ndarray, dist: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Route length from ``position`` to each goal, given its lengths ``dist`` to the
+    viewpoints (`reach`) and the (goals, viewpoints) ``legs`` on from them; whether it goes
+    straight; the viewpoint it goes through otherwise."""
+    through = np.argmin(dist[None, : len(space)] + legs, axis=1)
+    via = dist[through] + legs[np.arange(len(goals)), through]
+    # Straight there where the line is known free: a corridor's far end was seen from a
+    # viewpoint behind the robot, and the route through it would go back first.
+    straight = np.linalg.norm(goals - position, axis=1)
+    direct = clear_lines(space, np.repeat(position[None], len(goals), 0), goals)
+    direct &= straight < via
+    return np.where(direct, straight, via), direct, through
+
+
+def seen_through(
+    horizons: Sequence[Horizon], anchor: np.ndarray, gmm, band: tuple[float, float]
+) -> float:
+    """The share of ``gmm``'s weight in ``band`` (components by their means; ``gmm`` in the
+    frame of ``anchor``, the pose of the submap the horizons belong to) that lies inside
+    those horizons by `SEEN_MARGIN`: surfaces where that robot's rays went through. A
+    component counts when its mean and the points 1 sigma either way along its longest
+    horizontal axis do: EM spans a doorway with one component of the wall, whose mean lies
+    in the doorway (on a simulated office's 360° LiDAR that alone put 27 of 168 right matches
+    over 2 %)."""
+    R, t = anchor[:3, :3], anchor[:3, 3]
+    means = gmm.means @ R.T + t
+    level = (means[:, 2] >= band[0]) & (means[:, 2] <= band[1])
+    total = float(gmm.weights[level].sum())
+    if not horizons or total <= 0:
+        return 0.0
+    flat = np.einsum("ij,kjl,ml->kim", R, gmm.covariances[level], R)[:, :2, :2]
+    val, vec = np.linalg.eigh(flat)
+    axis = vec[:, :, 1] * np.sqrt(np.maximum(val[:, 1], 0.0))[:, None]
+    centre = means[level, :2]
+    probes = np.stack([centre, centre + axis, centre - axis], axis=1).reshape(-1, 2)
+    space = FreeSpace([h.moved(anchor) for h in horizons])
+    inside = space.contains(probes, shrink=SEEN_MARGIN, body=False).reshape(-1, 3).all(axis=1)
+    return float(gmm.weights[level][inside].sum()) / total
 
 
 def decode_horizons(data: bytes) -> list[Horizon]:

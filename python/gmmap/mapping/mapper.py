@@ -21,7 +21,7 @@ so one thread can match while another optimises.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -31,6 +31,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.calibration import Calibration, features
 from gmmap.mapping.confusion import confusion
+from gmmap.mapping.frontier import Horizon, seen_through
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
 from gmmap.mapping.place import (
     Candidate,
@@ -71,13 +72,23 @@ class Mapper:
         # (query, candidate) → its registration before refinement: deterministic, so reusable.
         self._registrations: dict[tuple[Node, Node], Registration] = {}
         self._confusions: dict[Node, float] = {}
+        # Free space each submap's robot saw (its horizons, anchor frame), where given.
+        self.horizons: dict[Node, list[Horizon]] = {}
         self._lock = threading.Lock()
 
     # ---- input ------------------------------------------------------------------------------
 
-    def add(self, submaps: Iterable[Submap], progress: Progress | None = None) -> list[Match]:
+    def add(
+        self,
+        submaps: Iterable[Submap],
+        progress: Progress | None = None,
+        horizons: Mapping[Node, list[Horizon]] | None = None,
+    ) -> list[Match]:
         """Holds ``submaps`` and verifies their unjudged candidate pairs; the accepted matches
-        become pose-graph edges. Returns the new matches."""
+        become pose-graph edges. ``horizons``: the free space their robots saw, where known
+        (exploring robots share it), which a match must not fill. Returns the new matches."""
+        with self._lock:
+            self.horizons.update(horizons or {})
         new = self.hold(submaps)
         matches = self.verify(new, progress)
         for m in matches:
@@ -105,6 +116,7 @@ class Mapper:
         matches = []
         for i, s in enumerate(submaps):
             judged = [self._verified(s, c) for c in self._candidates(s)]
+            judged = [self._unseen(s, m) if m.accepted else m for m in judged]
             with self._lock:
                 anchors = {key: self.submaps[key].anchor for key in self._keys(judged)}
             judged = distinct(judged, anchors, self.config.place)
@@ -127,6 +139,24 @@ class Mapper:
             self._registrations[key] = m.registration
             return m
         return self.db.judge(key[0], c, reg)
+
+    def _unseen(self, query: Submap, m: Match) -> Match:
+        """``m`` refused where it puts more than ``max_seen_through`` of either submap's
+        surfaces inside the free space the other's robot saw (both with horizons held): a
+        wall where rays went through, as a place alike turned round gives."""
+        limit = self.config.place.max_seen_through
+        key = (m.candidate.robot, m.candidate.seq)
+        with self._lock:
+            mine, theirs = self.horizons.get((query.robot, query.seq)), self.horizons.get(key)
+            candidate = self.submaps[key]
+        if limit is None or mine is None or theirs is None:
+            return m
+        T, band = m.registration.transform, self.config.planner.z_band
+        share = max(
+            seen_through(mine, query.anchor, candidate.gmm.transform(np.linalg.inv(T)), band),
+            seen_through(theirs, candidate.anchor, query.gmm.transform(T), band),
+        )
+        return replace(m, accepted=share <= limit, seen_through=share)
 
     def _unconfused(self, m: Match) -> Match:
         """``m`` refused unless its confidence is clearly above what either submap reaches
@@ -164,6 +194,7 @@ class Mapper:
         with self._lock:
             held = list(self.submaps.values())
             fresh._registrations = dict(self._registrations)
+            fresh.horizons = dict(self.horizons)
         fresh.add(held, progress)
         fresh.optimize()
         return fresh

@@ -164,6 +164,9 @@ class Match:
     confusion: float = 0.0
     # The confidence of this alignment turned half round (`turned`), relative to this one.
     turned: float = 0.0
+    # The share of either submap's surfaces this alignment puts where the other's robot saw
+    # free space (`gmmap.mapping.frontier.seen_through`); 0 where no horizons are held.
+    seen_through: float = 0.0
     # P(right) (`gmmap.mapping.calibration`) of a match that passed the tests up to
     # refinement; None before that, or where the calibration never saw its like.
     probability: float | None = None
