@@ -19,7 +19,7 @@ from gmmap.eval.explore.team import run_explore
 from gmmap.io.sim import World, sim_sensor
 from gmmap.io.sim.run import floor_pose, sensed
 from gmmap.io.sim.world import slab, wall
-from gmmap.mapping.explore import WAITING, Claim, Explorer, busy
+from gmmap.mapping.explore import Explorer
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import (
     FreeSpace,
@@ -264,44 +264,6 @@ def test_a_robot_heads_straight_for_a_frontier_it_has_a_free_line_to():
     route = explorer.route
     assert route is not None and route.goal[0] > 7.0
     assert len(route.waypoints) == 1, f"goes back through {route.waypoints[:-1]}"
-
-
-def in_a_corridor(position: float, peer: Claim | None, given_up: tuple = ()) -> Explorer:
-    """A robot at x = ``position`` in a corridor along x, seen from the origin to 5 m either
-    way (a frontier at each end), that chose a goal; ``peer``: a joined peer's claim (its
-    frame the robot's); ``given_up``: goals the robot gave up."""
-    angle = (np.arange(72) + 0.5) * 2 * np.pi / 72
-    reach = np.minimum(5.0, 0.7 / np.maximum(np.abs(np.sin(angle)), 1e-9))
-    explorer = Explorer("robot_0", config("corridor", 2))
-    explorer.recorder.closed = [Horizon(np.zeros(2), reach)]
-    explorer.position = np.array([position, 0.0])
-    explorer.failed = [np.asarray(g) for g in given_up]
-    if peer is not None:
-        explorer.receive_claim("robot_1", peer)
-        explorer._peer_frame = lambda robot: np.eye(4)
-    along = np.arange(-12.0, 12.0, 0.1)
-    walls = np.vstack([np.c_[along, np.full_like(along, y)] for y in (-0.8, 0.8)])
-    pts = np.c_[walls, np.full(len(walls), 0.5)]
-    seen = Gmm(np.full(len(pts), 1 / len(pts)), pts, np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1)))
-    explorer._choose(0.0, OccupancyField(seen, explorer.planner_options))
-    return explorer
-
-
-def test_joined_robots_share_the_frontiers_out_and_take_no_goal_twice():
-    """Alone, a robot heads for the nearer end of its corridor; a joined peer nearer that end
-    has it, and the robot heads for the other. A goal a nearer peer heads for is taken: with
-    the other end given up, the robot waits. A goal told by a peer farther from it (before
-    their maps joined, say) does not hold the robot off."""
-    east, west = np.array([4.6, 0.0]), np.array([-4.6, 0.0])
-    alone = in_a_corridor(1.0, None)
-    assert alone.route is not None and alone.route.goal[0] > 4.0
-    for goal in (None, east):
-        shared = in_a_corridor(1.0, Claim(np.array([3.0, 0.0]), goal))
-        assert shared.route is not None and shared.route.goal[0] < -4.0
-    waiting = in_a_corridor(1.0, Claim(np.array([3.0, 0.0]), east), given_up=[west])
-    assert waiting.route is None and waiting.status == WAITING and busy(waiting.status)
-    stale = in_a_corridor(1.0, Claim(np.array([-3.0, 0.0]), east))
-    assert stale.route is not None and stale.route.goal[0] > 4.0
 
 
 def assert_in_different_rooms(r) -> None:

@@ -6,10 +6,8 @@ submaps in its own map frame by the frames its `Mapper` finds between robots, so
 robots have joined their maps each explores alone, and after, they share one frontier set.
 
 Choosing a goal: the frontiers of the union of every known horizon, minus those behind a
-surface (the GMM occupancy field) and those given up. Joined robots share them out by route
-length from where each said it was (its claim): a frontier nearer a peer is the peer's, and
-one within ``claim_radius`` of a goal a nearer peer heads for is taken. A robot takes a
-peer's frontier only when it can reach none of its own, and a taken one never (it waits). A
+surface (the GMM occupancy field), those a joined peer heads for (its goal within
+``claim_radius``, unless this robot heads there already and is nearer) and those given up. A
 route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
 between them) and viewpoints within ``link_radius`` whose straight line is known free; a
 frontier's cost is the route to the cheapest viewpoint whose horizon holds its target plus
@@ -27,6 +25,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from gmmap.config import Config
@@ -38,8 +38,7 @@ from gmmap.mapping.frontier import (
     HorizonRecorder,
     clear_lines,
     encode_horizons,
-    reach,
-    route_costs,
+    unit,
 )
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.planner import ARRIVED, OccupancyField, Route
@@ -52,15 +51,6 @@ Node = tuple[str, int]
 # between two of 8, where a depth camera's robot, blind beside it, drove into walls).
 RING = np.linspace(0, 2 * math.pi, 16, endpoint=False)
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
-TIE = 0.5  # metres of route by which a peer must be nearer a frontier to have it
-CLAIM_MOVE = 1.0  # metres a robot moves before it tells its peers where it is again
-WAITING = "waiting: every frontier left is a peer's goal"
-
-
-def busy(status: str) -> bool:
-    """Whether a robot with this status may still move: exploring, or waiting for a peer
-    (it chooses again when the peer's goal is reached or given up)."""
-    return status in ("exploring", WAITING)
 
 
 @dataclass
@@ -84,21 +74,18 @@ class Claim:
     goal: np.ndarray | None
 
 
-def next_move(agent, stamp: float, told: Claim | None) -> tuple[np.ndarray | None, Claim | None]:
+def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
     """``agent.next_direction(stamp)`` (an `Explorer`, or anything with its ``claim`` and
-    ``next_direction``) and the claim to tell its peers: its new one where it differs from
-    ``told`` (the last one told) by a goal that moved more than 5 cm or came or went, or by
-    the robot having moved `CLAIM_MOVE` (peers share frontiers out by where it is), else None."""
+    ``next_direction``) and the claim to tell its peers: its new one where its goal moved by
+    more than 5 cm or came or went, else None."""
+    before = agent.claim().goal
     direction = agent.next_direction(stamp)
-    now = agent.claim()
-    if told is None:
-        return direction, now
-    if told.goal is None or now.goal is None:
-        changed = (told.goal is None) != (now.goal is None)
+    after = agent.claim()
+    if before is None or after.goal is None:
+        moved = (before is None) != (after.goal is None)
     else:
-        changed = bool(np.linalg.norm(told.goal - now.goal) > 0.05)
-    changed |= bool(np.linalg.norm(told.position - now.position) >= CLAIM_MOVE)
-    return direction, now if changed else None
+        moved = bool(np.linalg.norm(before - after.goal) > 0.05)
+    return direction, after if moved else None
 
 
 @dataclass
@@ -107,13 +94,8 @@ class Knowledge:
 
     space: FreeSpace
     field: OccupancyField | None
-    robot: str
     edges: list[tuple[int, int]] = field(default_factory=list)
-    last: dict[str, int] = field(default_factory=dict)  # each robot's latest viewpoint
-
-    @property
-    def last_own(self) -> int | None:
-        return self.last.get(self.robot)
+    last_own: int | None = None  # the robot's latest viewpoint among ``space``'s
 
 
 class Explorer:
@@ -237,9 +219,9 @@ class Explorer:
             OccupancyField(concatenate(gmms, shares), self.planner_options) if gmms else None
         )
         space = FreeSpace(horizons)
-        last = {robot: i for i, robot in enumerate(chains)}  # keys sort by seq: the latest
+        own = [i for i, robot in enumerate(chains) if robot == self.robot]
         # Held before the edges are found: finding them evaluates this knowledge's field.
-        self._knowledge = Knowledge(space, team_field, self.robot, last=last)
+        self._knowledge = Knowledge(space, team_field, last_own=own[-1] if own else None)
         self._dirty = False
         self._knowledge.edges = self._edges(space, chains)
         return self._knowledge
@@ -321,36 +303,51 @@ class Explorer:
     def _choose(self, stamp: float, live: OccupancyField | None) -> None:
         self._dirty |= self._reoptimize
         k = self.knowledge()
+        o = self.options
         space = self.space()
-        fronts = self._frontiers(space, live)
+        fronts = space.frontiers(self._blocked(live, space))
+        # A frontier whose target is where the robot stands is one it cannot see past.
+        here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
+        self.failed += here
+        fronts = [f for f in fronts if not self._failed_near(f.goal)]
+        # Small frontiers only once no large one is left: the far end of a corridor seen
+        # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
+        # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
+        fronts = (
+            [f for f in fronts if f.open >= o.min_frontier]
+            or [f for f in fronts if f.size >= o.min_frontier]
+            or fronts
+        )
         if not fronts:
             self.route, self.status = None, "done: no frontier left that it can reach"
             return
         peers = self._joined_peers()
-        n = len(fronts)
-        goals = np.vstack([[f.goal for f in fronts], *[[g] for *_, g in peers if g is not None]])
+        claimed = [g for _, g in peers if g is not None]
+        mine = None if self.route is None else self.route.goal
+        keep_mine = mine is not None and self._nearest(mine, peers)
+        free = [
+            f
+            for f in fronts
+            if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
+            or (keep_mine and np.linalg.norm(f.goal - mine) < 1.0)
+        ]
+        fronts = free or fronts
+        dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.
+        goals, rows = np.array([f.goal for f in fronts]), np.arange(len(fronts))
         seen = space.seen_by(goals, shrink=BACK)
-        seen[np.arange(n), [f.horizon for f in fronts]] = True
+        seen[rows, [f.horizon for f in fronts]] = True
         legs = np.where(seen, np.linalg.norm(goals[:, None] - space.origins[None], axis=2), np.inf)
-        edges = self._graph_edges(space, k)
-        latest = len(space) - 1 if len(space) > len(k.space) else k.last_own
-        link = self.options.link_radius
-        dist, pred, start = reach(space, edges, self.position, latest, link)
-        cost, direct, through = route_costs(space, legs, goals, self.position, dist)
-        theirs = np.array([self._peer_costs(space, k, edges, legs, goals, p) for p in peers])
-        theirs = theirs.reshape(len(peers), len(goals))
-        mine, taken = self._shares(goals[:n], cost, theirs, peers)
-        if taken.all():
-            self.route, self.status = None, WAITING
-            return
-        # A frontier nearer a peer only once this robot can reach none of its own: the least
-        # crowded of them.
-        costs = cost[:n] + np.maximum(0.0, cost[None, :n] - theirs[:, :n]).sum(axis=0)
-        costs[taken] = np.inf
-        if (mine & np.isfinite(costs)).any():
-            costs[~mine] = np.inf
+        through = np.argmin(dist[None, : len(space)] + legs, axis=1)
+        via = dist[through] + legs[rows, through]
+        # Straight there where the line is known free: a corridor's far end was seen from a
+        # viewpoint behind the robot, and the route through it would go back first.
+        straight = np.linalg.norm(goals - self.position, axis=1)
+        direct = clear_lines(space, np.repeat(self.position[None], len(goals), 0), goals)
+        direct &= straight < via
+        route_cost = np.where(direct, straight, via)
+        costs = [c + self._crowding(f.goal, peers) for c, f in zip(route_cost, fronts, strict=True)]
         best = int(np.argmin(costs))
         if not math.isfinite(costs[best]):
             self.route = None
@@ -369,23 +366,6 @@ class Explorer:
         self.route = Route(waypoints, f.goal, stamp)
         self.status = "exploring"
 
-    def _frontiers(self, space: FreeSpace, live: OccupancyField | None) -> list:
-        """The frontiers this robot may choose from, best kind first."""
-        o = self.options
-        fronts = space.frontiers(self._blocked(live, space))
-        # A frontier whose target is where the robot stands is one it cannot see past.
-        here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
-        self.failed += here
-        fronts = [f for f in fronts if not self._failed_near(f.goal)]
-        # Small frontiers only once no large one is left: the far end of a corridor seen
-        # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
-        # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
-        return (
-            [f for f in fronts if f.open >= o.min_frontier]
-            or [f for f in fronts if f.size >= o.min_frontier]
-            or fronts
-        )
-
     def _still_open(self, fronts: list, costs: list[float]) -> int | None:
         """The frontier the current route heads for, if it is still one."""
         if self.route is None:
@@ -394,53 +374,57 @@ class Explorer:
         i = int(np.argmin(gaps))
         return i if gaps[i] < 1.0 and math.isfinite(costs[i]) else None
 
-    def _graph_edges(self, space: FreeSpace, k: Knowledge) -> list[tuple[int, int]]:
-        """The route graph with this robot's viewpoints since its last submap (it drove from
-        one to the next)."""
-        pending = list(range(len(k.space), len(space)))
-        edges = list(k.edges) + [(i, i + 1) for i in pending[:-1]]
+    def _distances(
+        self, space: FreeSpace, k: Knowledge, live: OccupancyField | None
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """Route lengths from the robot to every viewpoint (the robot is the last node)."""
+        n, own = len(space), len(k.space)
+        edges = list(k.edges)
+        pending = list(range(own, n))  # this robot's viewpoints since its last submap
+        edges += [(i, i + 1) for i in pending[:-1]]
         if pending and k.last_own is not None:
-            edges.append((k.last_own, pending[0]))
-        return edges
+            edges.append((k.last_own, pending[0]))  # it drove from one to the other
+        start = n
+        near = np.array(
+            cKDTree(space.origins).query_ball_point(self.position, self.options.link_radius), int
+        )
+        if len(near):
+            # From just off the robot: it stands where it stands, even inside a margin.
+            off = self.position + 0.3 * unit(space.origins[near] - self.position)
+            clear = clear_lines(space, off, space.origins[near])
+            edges += [(start, int(i)) for i in near[clear]]
+        latest = pending[-1] if pending else k.last_own
+        if latest is not None:
+            edges.append((start, latest))  # the viewpoint it is at, or just left
+        e = np.array(edges, dtype=int).reshape(-1, 2)
+        pts = np.vstack([space.origins, self.position[None]])
+        w = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1) + 1e-6
+        graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n + 1, n + 1)).tocsr()
+        dist, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
+        return dist, pred, start
 
-    def _peer_costs(
-        self, space: FreeSpace, k: Knowledge, edges: list, legs: np.ndarray, goals, peer
-    ) -> np.ndarray:
-        """A joined peer's route length to each goal, from where it said it was by way of
-        the last viewpoint it shared; as the crow flies where that reaches none."""
-        robot, position, _ = peer
-        latest = k.last.get(robot)
-        dist, _, _ = reach(space, edges, position, latest, self.options.link_radius)
-        cost = route_costs(space, legs, goals, position, dist)[0]
-        return np.where(np.isfinite(cost), cost, np.linalg.norm(goals - position, axis=1))
-
-    def _shares(
-        self, fronts: np.ndarray, cost: np.ndarray, theirs: np.ndarray, peers: list
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Which frontier targets are this robot's (no joined peer nearer by route, by `TIE`
-        m) and which are taken (within ``claim_radius`` of a goal a joined peer heads for and
-        is nearer than this robot is): robots spread out, no goal is taken twice, and a goal
-        told before two maps joined does not hold a nearer robot off it."""
-        n = len(fronts)
-        mine = (theirs[:, :n] + TIE >= cost[None, :n]).all(axis=0)
-        taken = np.zeros(n, dtype=bool)
-        heading = [j for j, (*_, g) in enumerate(peers) if g is not None]
-        for m, j in enumerate(heading):
-            if theirs[j, n + m] <= cost[n + m]:
-                taken |= np.linalg.norm(fronts - peers[j][2], axis=1) <= self.options.claim_radius
-        return mine & ~taken, taken
-
-    def _joined_peers(self) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
-        """Each joined peer's last claim in this robot's frame: (robot, position, goal or
-        None)."""
+    def _joined_peers(self) -> list[tuple[np.ndarray, np.ndarray | None]]:
+        """Each joined peer's last claim in this robot's frame: (position, goal or None)."""
         out = []
         for robot, claim in self.claims.items():
             T = self._peer_frame(robot)
             if T is not None:
                 R, t = T[:2, :2], T[:2, 3]
                 goal = None if claim.goal is None else R @ claim.goal + t
-                out.append((robot, R @ claim.position + t, goal))
+                out.append((R @ claim.position + t, goal))
         return out
+
+    def _nearest(self, goal: np.ndarray, peers: list) -> bool:
+        """Whether no joined peer is nearer ``goal`` than this robot: then a goal it already
+        heads for stays its own, whoever claimed it since (two robots do not swap back and
+        forth)."""
+        mine = float(np.linalg.norm(goal - self.position))
+        return all(np.linalg.norm(goal - position) >= mine for position, _ in peers)
+
+    def _crowding(self, goal: np.ndarray, peers: list) -> float:
+        """A cost for goals nearer a joined peer than this robot: robots spread out."""
+        mine = float(np.linalg.norm(goal - self.position))
+        return sum(max(0.0, mine - float(np.linalg.norm(goal - p))) for p, _ in peers)
 
     def _failed_near(self, goal: np.ndarray) -> bool:
         return any(np.linalg.norm(goal - g) < 0.75 for g in self.failed)

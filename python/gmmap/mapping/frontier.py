@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from gmmap.errors import FileFormatError, InvalidInputError
@@ -126,46 +126,6 @@ def clear_lines(space, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     t = np.linspace(0, 1, steps)
     pts = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, a.shape[1])
     return space.contains(pts, shrink=0.1).reshape(len(a), steps).all(axis=1)
-
-
-def reach(
-    space, edges: list, position: np.ndarray, latest: int | None, link: float
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Route lengths from ``position`` to every viewpoint of ``space`` over the graph of
-    ``edges`` between them, and the predecessors (``position`` is the last node, the start):
-    it links to the viewpoints within ``link`` m with a known free line and to ``latest`` (the
-    one it is at or just left)."""
-    n = start = len(space)
-    edges = list(edges)
-    near = np.array(cKDTree(space.origins).query_ball_point(position, link), int)
-    if len(near):
-        # From just off the robot: it stands where it stands, even inside a margin.
-        off = position + 0.3 * unit(space.origins[near] - position)
-        edges += [(start, int(i)) for i in near[clear_lines(space, off, space.origins[near])]]
-    if latest is not None:
-        edges.append((start, latest))
-    e = np.array(edges, dtype=int).reshape(-1, 2)
-    pts = np.vstack([space.origins, position[None]])
-    w = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1) + 1e-6
-    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n + 1, n + 1)).tocsr()
-    dist, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
-    return dist, pred, start
-
-
-def route_costs(
-    space, legs: np.ndarray, goals: np.ndarray, position: np.ndarray, dist: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Route length from ``position`` to each goal, given its lengths ``dist`` to the
-    viewpoints (`reach`) and the (goals, viewpoints) ``legs`` on from them; whether it goes
-    straight; the viewpoint it goes through otherwise."""
-    through = np.argmin(dist[None, : len(space)] + legs, axis=1)
-    via = dist[through] + legs[np.arange(len(goals)), through]
-    # Straight there where the line is known free: a corridor's far end was seen from a
-    # viewpoint behind the robot, and the route through it would go back first.
-    straight = np.linalg.norm(goals - position, axis=1)
-    direct = clear_lines(space, np.repeat(position[None], len(goals), 0), goals)
-    direct &= straight < via
-    return np.where(direct, straight, via), direct, through
 
 
 def seen_through(

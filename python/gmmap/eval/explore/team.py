@@ -24,7 +24,7 @@ from gmmap.eval.explore.coverage import Coverage
 from gmmap.fleet.wire.codec import encode
 from gmmap.io.sim import DepthCamera, Lidar, World, floor_pose, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
-from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, busy, next_move
+from gmmap.mapping.explore import Explorer, SharedSubmap, next_move
 from gmmap.mapping.frontier import FreeSpace, Horizon
 
 MODES = ("shared", "no-sharing", "dense")
@@ -118,7 +118,6 @@ class Team:
         self.agents = [self._agent(i) for i in range(self.n)]
         self.coverage = Coverage(self.world, np.array([b.xy for b in self.bodies]))
         self.bytes = [0] * self.n
-        self.told: list[Claim | None] = [None] * self.n  # each robot's last claim told
 
     def _agent(self, i: int):
         if self.mode == "dense":
@@ -208,16 +207,15 @@ class Team:
 
     def _decide(self, i: int, t: float) -> tuple[np.ndarray | None, bool]:
         """Robot i's direction of travel in its map frame (None: it stays) and whether it is
-        still exploring; a goal it changed or a move goes to its peers as a claim."""
+        still exploring; a goal it changed goes to its peers as a claim."""
         agent = self.agents[i]
-        direction, claim = next_move(agent, EPOCH + t, self.told[i])
+        direction, claim = next_move(agent, EPOCH + t)
         if self.mode != "no-sharing" and claim is not None:
-            self.told[i] = claim
             self.bytes[i] += CLAIM_BYTES
             for j, other in enumerate(self.agents):
                 if j != i:
                     other.receive_claim(self.names[i], claim)
-        return direction, busy(agent.status)
+        return direction, agent.status == "exploring"
 
     def _horizons(self) -> list[Horizon]:
         """The team's horizons in the world frame (the area it knows is free)."""

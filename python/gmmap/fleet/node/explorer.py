@@ -6,8 +6,8 @@ On each tick the robot first takes in every message its peers had sent by their 
 step (the tick says how many; it waits for them, so what a robot knows does not depend on
 how Zenoh interleaves its links), renders its sensor at the true pose the tick gives, maps
 the frame and sends a submap it completed (kinds ``submap`` and ``horizons``), chooses its
-direction, tells a changed goal or a move (``claim``) and answers (``step``). Peers'
-submaps arrive as every robot decodes them: quantised, as sent.
+direction, tells a changed goal (``claim``) and answers (``step``). Peers' submaps arrive as
+every robot decodes them: quantised, as sent.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from gmmap.fleet.wire.explore import (
     encode_claim,
     encode_json,
 )
-from gmmap.mapping.explore import Claim, Explorer, SharedSubmap, next_move
+from gmmap.mapping.explore import Explorer, SharedSubmap, next_move
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import decode_horizons, encode_horizons
 
@@ -60,7 +60,6 @@ class ExplorerNode:
         self.received: dict[str, int] = defaultdict(int)
         self.parts: dict[tuple[str, int], dict[str, bytes]] = defaultdict(dict)
         self.sent = self.bytes = 0
-        self.told: Claim | None = None  # the last claim told to peers
 
     def run(self) -> dict:
         """Explores until the simulator's last tick; this robot's summary."""
@@ -132,9 +131,8 @@ class ExplorerNode:
         self._send(self.explorer.observe(frame))
         if not tick.decide:
             return Step(None, self.explorer.status, self.sent, self.bytes)
-        direction, claim = next_move(self.explorer, frame.stamp, self.told)
+        direction, claim = next_move(self.explorer, frame.stamp)
         if claim is not None:
-            self.told = claim
             self._publish("claim", self.sent, encode_claim(claim))
         moving = None if direction is None else [float(v) for v in direction[:2]]
         return Step(moving, self.explorer.status, self.sent, self.bytes)
