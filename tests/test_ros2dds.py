@@ -88,14 +88,17 @@ def test_dds_topics_through_the_bridge_are_mapped_and_the_map_comes_back(tmp_pat
                     [k for k in heard["map"][-1].markers if k.action == 0] if heard["map"] else []
                 )
 
-            assert wait(lambda: len(shown()) == len(node.global_map().gmm) > 0, 15)
+            def agrees() -> bool:  # one snapshot of each: the map changes while the node maps
+                markers, gmm = shown(), node.global_map().gmm
+                means = np.array([[k.pose.position.x, k.pose.position.y, k.pose.position.z]
+                                  for k in markers]).reshape(-1, 3)  # fmt: skip
+                return len(markers) == len(gmm) > 0 and np.allclose(
+                    np.sort(means, axis=0), np.sort(gmm.means, axis=0), atol=1e-4
+                )
+
+            assert wait(agrees, 15)
             assert {k.ns for k in shown()} == {"a"}
             assert all(k.type == 2 and k.scale.x > 0 for k in shown())  # SPHERE, scaled
-            means = np.array([[k.pose.position.x, k.pose.position.y, k.pose.position.z]
-                              for k in shown()])  # fmt: skip
-            assert np.allclose(
-                np.sort(means, axis=0), np.sort(node.global_map().gmm.means, axis=0), atol=1e-4
-            )
             cloud = heard["points"][-1]  # the merged map sampled, in the reference's frame
             assert cloud.width == MAP_POINTS and cloud.header.frame_id == "a/map"
             assert [f.name for f in cloud.fields][:3] == ["x", "y", "z"]
