@@ -97,9 +97,9 @@ DESCRIPTIONS: dict[str, str] = {
     "and how it grows with the map's component count. Baseline: one full A* plan on a 5 cm "
     "grid of the same scans (`astar_over_gmm`: how many GMM steps one A* plan costs).",
     "explore": "Simulated robots exploring procedural offices never used while the explorer "
-    "was written (`gmmap explore`, 16-beam LiDAR on two worlds and the depth camera on one, "
-    "3 robots, 300 simulated seconds at most; `sweep`: the team alone on five more worlds "
-    "with both sensors, 150 s): "
+    "was written (`gmmap explore`, random-office:101 with the 16-beam LiDAR and with the "
+    "depth camera, 3 robots, 300 simulated seconds at most; `sweep`: the team alone on more "
+    "worlds with both sensors, 150 s): "
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
     "without sharing, and frontier exploration on a 5 cm grid from shared point clouds (given "
