@@ -148,9 +148,9 @@ class Mapper:
         key = (m.candidate.robot, m.candidate.seq)
         with self._lock:
             mine, theirs = self.horizons.get((query.robot, query.seq)), self.horizons.get(key)
+            if limit is None or mine is None or theirs is None:
+                return m
             candidate = self.submaps[key]
-        if limit is None or mine is None or theirs is None:
-            return m
         T, band = m.registration.transform, self.config.planner.z_band
         share = max(
             seen_through(mine, query.anchor, candidate.gmm.transform(np.linalg.inv(T)), band),
