@@ -80,6 +80,7 @@ def sweep(worlds: list[str], sensors: list[str], robots: int, budget: float) -> 
             r = run_explore(configured(world, sensor, robots, budget), "shared").summary()
             keep = ("world", "sensor", "coverage", "time_to_90_s", "collisions", "statuses")
             runs.append({k: r[k] for k in keep})
+            print(f"  {json.dumps(runs[-1])}", file=sys.stderr)  # a cut run keeps what ended
     return {
         "budget_s": budget,
         "runs": runs,
