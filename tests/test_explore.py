@@ -360,35 +360,6 @@ def test_a_footprint_that_a_wall_cuts_between_its_test_points_is_not_known_free(
     assert not explorer.roomy(0.755 * n[None], space)[0]  # 0.245 m: the wall cuts it
 
 
-def _wall_patch(centre: np.ndarray) -> np.ndarray:
-    """Points of a 0.5 m wide piece of wall in the robot's band about ``centre``, facing the
-    origin."""
-    n = centre / np.linalg.norm(centre)
-    s, z = (
-        a.reshape(-1, 1)
-        for a in np.meshgrid(np.linspace(-0.25, 0.25, 11), np.linspace(0.1, 1.1, 21))
-    )
-    return np.hstack([centre + s * np.array([-n[1], n[0]]), z])
-
-
-def test_a_robot_turning_on_the_spot_still_steers_clear_of_what_it_saw_beside_it():
-    """A depth camera's robot turning in a doorway closes a submap per 90°: the jamb it saw
-    first must stay in the field it steers by (traced: collisions on random-office:110 and
-    114, where the horizons of views from elsewhere called the jamb free)."""
-    explorer = Explorer("robot_0")
-    jamb = np.array([[0.45, 0.0]])
-    for k in range(48):  # a whole turn, 7.5° a frame; the jamb is seen in the first only
-        yaw = math.radians(7.5 * k)
-        pose = floor_pose(0.0, 0.0, yaw)
-        seen = _wall_patch(jamb[0] if k == 0 else 3.0 * np.array([math.cos(yaw), math.sin(yaw)]))
-        local = (seen - pose[:3, 3]) @ pose[:3, :3]
-        explorer.observe(Frame(float(k), local.astype(np.float32), pose))
-    level = explorer.planner_options.max_occupancy
-    assert len(explorer._seen) >= 3  # submaps closed since the jamb's
-    assert explorer._live_field().occupancy_tiled(jamb)[0] < level  # since the last-but-one
-    assert explorer._live_field(near=True).occupancy_tiled(jamb)[0] >= level
-
-
 def test_where_a_robot_stood_is_free_but_not_seen_through():
     """The disc about a viewpoint is free for routes, not for the planner's field: a depth
     camera never sees beside its robot, which may have passed a wall within that disc."""

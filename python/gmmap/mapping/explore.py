@@ -16,14 +16,12 @@ known free. Frontiers with unknown space behind them come first, then large ones
 Moving: the GMM gradient planner steers towards the next waypoint on the team's field, zero
 where the robot's footprint is known free (EM spans a doorway with the wall's components; the
 horizons saw through it), and on a field of what the sensor saw since the last-but-one submap
-and, within `NEAR_SEEN` m of the robot, in its last `SEEN_SUBMAPS` submaps (a robot avoids
-what it has just seen, shared or not).
+(a robot avoids what it has just seen, shared or not).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,11 +51,6 @@ Node = tuple[str, int]
 # between two of 8, where a depth camera's robot, blind beside it, drove into walls).
 RING = np.linspace(0, 2 * math.pi, 16, endpoint=False)
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
-# A depth camera's robot turning in a doorway closes a submap per 90° and would forget the
-# jamb beside it, which the horizons of views from elsewhere may call free (the collisions
-# on random-office:110 and 114): its own recent submaps stay in its live field near it.
-SEEN_SUBMAPS = 6
-NEAR_SEEN = 2.0  # metres
 
 
 @dataclass
@@ -126,7 +119,8 @@ class Explorer:
         self.position = np.zeros(2)
         self._chosen_at = -math.inf
         self._reoptimize = False
-        self._seen: deque[np.ndarray] = deque(maxlen=SEEN_SUBMAPS)  # own points, map frame
+        self._recent: np.ndarray | None = None
+        self._recent_anchor = np.eye(4)
         self._knowledge: Knowledge | None = None
         self._dirty = True
 
@@ -179,8 +173,8 @@ class Explorer:
             self._reoptimize |= s.robot != self.robot or any(m.accepted for m in matches)
         if s.robot == self.robot:
             self._dirty = True
-            if s.points is not None:
-                self._seen.append(self._in_band(s.points @ s.anchor[:3, :3].T + s.anchor[:3, 3]))
+            self._recent = s.points  # until the next submap: in the live field (anchor frame)
+            self._recent_anchor = s.anchor
 
     # ---- where the team's submaps are -------------------------------------------------------
 
@@ -234,21 +228,21 @@ class Explorer:
 
     # ---- occupancy --------------------------------------------------------------------------
 
-    def _in_band(self, pts: np.ndarray) -> np.ndarray:
-        lo, hi = self.planner_options.z_band
-        return voxel_filter(pts[(pts[:, 2] >= lo) & (pts[:, 2] <= hi)], 0.1)
-
-    def _live_field(self, near: bool = False) -> OccupancyField | None:
+    def _live_field(self) -> OccupancyField | None:
         """What the sensor saw since the last-but-one submap, as small components (5 cm
-        spread): a robot steers clear of what it has just seen, shared or not. With ``near``,
-        also what its last `SEEN_SUBMAPS` saw within `NEAR_SEEN` of it (for steering)."""
-        parts = [*self._seen][-1:]
+        spread): a robot steers clear of what it has just seen, shared or not."""
+        parts = []
         if self.builder.anchor is not None and len(self.builder.buffer):
             a = self.builder.anchor
-            parts.append(self._in_band(self.builder.buffer.centroids() @ a[:3, :3].T + a[:3, 3]))
-        for older in [*self._seen][:-1] if near else []:
-            parts.append(older[np.linalg.norm(older[:, :2] - self.position, axis=1) < NEAR_SEEN])
-        pts = voxel_filter(np.vstack(parts), 0.1) if parts else np.zeros((0, 3))
+            parts.append(self.builder.buffer.centroids() @ a[:3, :3].T + a[:3, 3])
+        if self._recent is not None:
+            a = self._recent_anchor
+            parts.append(self._recent @ a[:3, :3].T + a[:3, 3])
+        if not parts:
+            return None
+        pts = np.vstack(parts)
+        lo, hi = self.planner_options.z_band
+        pts = voxel_filter(pts[(pts[:, 2] >= lo) & (pts[:, 2] <= hi)], 0.1)
         if not len(pts):
             return None
         covs = np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1))
@@ -443,9 +437,10 @@ class Explorer:
         waiting = self.status != "exploring" and stamp - self._chosen_at < self.options.replan_s
         if r is None and waiting and not self._dirty:
             return None  # nothing to do until the team's map changes or time passes
+        live = self._live_field()
         if r is None or stamp - r.chosen_at >= self.options.replan_s:
             self._chosen_at = stamp
-            self._choose(stamp, self._live_field())
+            self._choose(stamp, live)
             r = self.route
         if r is None:
             return None
@@ -453,8 +448,7 @@ class Explorer:
         if target is None:
             self.route = None  # arrived: the next step chooses again
             return None
-        field = _MaxField(self, self._live_field(near=True))
-        direction = r.steer(self.position, target, self.planner_options, field)
+        direction = r.steer(self.position, target, self.planner_options, _MaxField(self, live))
         if direction is None:
             self.failed.append(r.goal)
             self.route = None
