@@ -169,20 +169,50 @@ def test_anchors_are_compact() -> None:
     assert len(w.buf) <= 1 + 3 * 3 + 3
 
 
-def test_version_1_messages_still_decode() -> None:
-    """Stores hold version-1 messages: the same but for the anchor, its entry codes alone."""
+def test_version_1_and_2_messages_still_decode() -> None:
+    """Stores hold older messages: version 2 lacks the free-space block (its one byte, 0, for
+    a submap without horizons), version 1 also has the anchor as its entry codes alone."""
     s = Submap("r", 3, level(np.eye(4), (0, 0, 1)), np.array([5.0, 6.0]), 9, random_gmm(5))
     s.anchor[:3, 3] = [1.0 / 3.0, 2.0, -7.25]
     new = gmmap.encode(s)
     w = codec._Writer()
     anchors_codec.write_anchor(w, s.anchor)
     start = new.index(bytes(w.buf))
+    end = start + len(w.buf)
+    assert new[end] == 0  # no horizons
+    v2 = new[:4] + b"\x02" + new[5:end] + new[end + 1 :]
     exact = codec._Writer()
     anchors_codec.write_anchor_entries(exact, s.anchor)
-    old = new[:4] + b"\x01" + new[5:start] + bytes(exact.buf) + new[start + len(w.buf) :]
-    out = gmmap.decode(old)
-    assert np.array_equal(out.anchor, s.anchor)
-    assert np.array_equal(out.gmm.means, gmmap.decode(new).gmm.means)
+    v1 = new[:4] + b"\x01" + new[5:start] + bytes(exact.buf) + new[end + 1 :]
+    now = gmmap.decode(new)
+    for old, anchor in ((v1, s.anchor), (v2, now.anchor)):
+        out = gmmap.decode(old)
+        assert np.array_equal(out.anchor, anchor) and out.horizons is None
+        assert np.array_equal(out.gmm.means, now.gmm.means)
+
+
+def test_horizons_round_trip_to_their_codes_and_bad_blocks_are_refused() -> None:
+    """A submap's free-space horizons travel as 10 cm codes (NaN: not seen) at cm viewpoints;
+    a band upside down or too few bins is a DecodeError."""
+    from gmmap.mapping.frontier import Horizon, code_ranges, range_codes
+
+    ranges = np.linspace(0.3, 20.0, 72)
+    ranges[5:9] = np.nan
+    views = [Horizon(np.array([0.0, 0.0]), ranges), Horizon(np.array([1.234, -0.5]), ranges[::-1])]
+    s = Submap("r", 1, np.eye(4), np.array([0.0]), 9, random_gmm(5), horizons=views,
+               horizon_band=(-0.5, 0.5))  # fmt: skip
+    out = gmmap.decode(gmmap.encode(s))
+    assert out.horizon_band == (-0.5, 0.5) and len(out.horizons) == 2
+    np.testing.assert_allclose(out.horizons[1].origin, [1.23, -0.5])
+    np.testing.assert_array_equal(out.horizons[0].ranges, code_ranges(range_codes(ranges)))
+    w = codec._Writer()
+    codec._write_horizons(w, views, (-0.5, 0.5))
+    good = bytes(w.buf)
+    for bad in (good[:1] + b"\x64\x63" + good[3:], good[:3] + b"\x04" + good[4:], good[:-1]):
+        with pytest.raises(DecodeError):
+            codec._read_horizons(codec._Reader(bad))
+    with pytest.raises(InvalidInputError):
+        codec._write_horizons(codec._Writer(), views, (-0.5, 1e4))
 
 
 def test_edge_cases_round_trip() -> None:

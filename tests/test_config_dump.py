@@ -27,7 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_every_setting_has_a_one_line_meaning():
     assert not missing(), (
         f"settings without a meaning: {missing()}; give each a `#:` comment beside its "
-        "default (or on the line above it) in gmmap/options.py, fleet_options.py or ros_options.py"
+        "default (or on the line above it) in gmmap/options.py, fleet_options.py, "
+        "ros_options.py or sim_options.py"
     )
     long = {
         f"{name}.{key}": len(text)

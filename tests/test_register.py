@@ -205,27 +205,37 @@ def test_repeats_pool_pairs_built_with_other_seeds():
         evaluate_registration(frames, 2, ("points",), repeats=0)
 
 
-def test_shifted_starts_find_a_part_far_from_the_whole_centroid(scene):
-    """A piece of a scene, its centroid a metre from the whole's: starts shifted by that much
-    find it, and refining more distinct coarse solutions never returns a worse one (it refines
-    a superset of them)."""
+def test_the_vote_finds_a_part_far_from_the_whole_centroid():
+    """A corner of a 12 m room-sized scene, its centroid 4 m from the whole's: the translation
+    votes find it where starts with the centroids aligned do not; every distinct basin comes
+    back, the best first, and refining more distinct coarse solutions never returns a worse
+    one."""
     from gmmap.eval.registration import pose_errors
 
-    part = scene.means[:, 0] > np.quantile(scene.means[:, 0], 0.6)
-    piece = Gmm(scene.weights[part] / scene.weights[part].sum(), scene.means[part],
-                scene.covariances[part])  # fmt: skip
+    rng = np.random.default_rng(3)
+    n = 120
+    axes = np.linalg.qr(rng.normal(size=(n, 3, 3)))[0]
+    spread = np.array([0.3, 0.15, 0.02]) ** 2
+    scene = Gmm(np.full(n, 1 / n), rng.uniform([0, 0, 0], [12, 12, 2], (n, 3)),
+                np.einsum("nij,j,nkj->nik", axes, spread, axes))  # fmt: skip
+    part = (scene.means[:, 0] > 7) & (scene.means[:, 1] > 7)
+    piece = Gmm(scene.weights[part] / part.sum() * n, scene.means[part], scene.covariances[part])
     truth = rigid(2.0, [0.3, -0.2, 0.0])
     source = piece.transform(np.linalg.inv(truth))
-    offset = np.linalg.norm((piece.weights @ piece.means - scene.weights @ scene.means)[:2])
-    r = register(source, scene, start_offset=offset, refine_starts=4)
+    r = register(source, scene, refine_starts=4)
     t, deg = pose_errors(r.transform, truth)
     assert t < 0.01 and deg < 0.5
+    assert np.allclose(r.basins[0][0], r.transform) and r.basins[0][1] == r.confidence
+    assert [c for _, c in r.basins] == sorted((c for _, c in r.basins), reverse=True)
+    assert len(r.basins) == 1 or r.alternative_confidence == r.basins[1][1]
+    centroids = register(source, scene, search_cell=0.0, refine_starts=4)
+    assert pose_errors(centroids.transform, truth)[0] > 0.5
     previous = 0.0
     for k in (1, 2, 3, 5):
-        c = register(source, scene, start_offset=offset, refine_starts=k).confidence
+        c = register(source, scene, refine_starts=k).confidence
         assert c >= previous - 1e-9
         previous = c
     with pytest.raises(InvalidInputError):
         register(source, scene, refine_starts=0)
     with pytest.raises(InvalidInputError):
-        register(source, scene, start_offset=-1.0)
+        register(source, scene, search_cell=-1.0)

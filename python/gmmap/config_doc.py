@@ -1,13 +1,13 @@
 """What each setting means, read from where its default is defined; the commented dump and the
 reference page.
 
-Each field of the sections (`gmmap.options`, `gmmap.fleet_options`, `gmmap.ros_options`) carries its
-one-line meaning as a ``#:`` comment (the Sphinx convention for attribute docs): beside the field,
-or on the line(s) right above it, where plain ``#`` comments may explain why the default is what it
-is. ``gmmap config --dump`` writes each meaning as a YAML comment above its key (the file loads back
-unchanged), and ``gmmap config --reference`` writes the Markdown reference,
-``docs/guide/config-reference.md``. Reading the comments needs the modules' source, which an
-installed package has beside its bytecode.
+Each field of the sections (`gmmap.options`, `gmmap.fleet_options`, `gmmap.ros_options`,
+`gmmap.sim_options`) carries its one-line meaning as a ``#:`` comment (the Sphinx convention for
+attribute docs): beside the field, or on the line(s) right above it, where plain ``#`` comments may
+explain why the default is what it is. ``gmmap config --dump`` writes each meaning as a YAML comment
+above its key (the file loads back unchanged), and ``gmmap config --reference`` writes the Markdown
+reference, ``docs/guide/config-reference.md``. Reading the comments needs the modules' source, which
+an installed package has beside its bytecode.
 """
 
 from __future__ import annotations
@@ -137,8 +137,9 @@ def reference() -> str:
         "",
         "Every setting of the configuration tree ([Configuration](configuration.md)), with its",
         "default and what it means. This page is generated from the `#:` comments beside the",
-        "defaults in `python/gmmap/options.py`, `python/gmmap/fleet_options.py` and",
-        "`python/gmmap/ros_options.py` (the same text as the comments of `gmmap config --dump`)",
+        "defaults in `python/gmmap/options.py`, `python/gmmap/fleet_options.py`,",
+        "`python/gmmap/ros_options.py` and `python/gmmap/sim_options.py` (the same text as the",
+        "comments of `gmmap config --dump`)",
         "and the sections' docstrings there.",
         "Regenerate it after changing a setting (a test fails while it is out of date):",
         "",

@@ -1,11 +1,12 @@
 """Every setting of gmmap, each defined once with its one default: the sections of `gmmap.config`.
 
-One frozen dataclass per stage of the data flow (build, select, register, place, backend, transport,
-robot, planner, sim); the fleet's sections are defined in `gmmap.fleet_options` and the ROS one in
-`gmmap.ros_options`, and re-exported here. The stages take their section; the Rust core receives
-every value it uses from here. This module imports nothing heavy (no GTSAM, no Zenoh), so a core
-install can read, validate and dump a configuration. Each field's meaning is its ``#:`` comment,
-beside it or right above it (`gmmap.config_doc`); plain ``#`` comments say why.
+One frozen dataclass per stage of the data flow (build, select, register, place, backend, planner,
+explore); the fleet's sections are defined in `gmmap.fleet_options`, the ROS one in
+`gmmap.ros_options` and the simulator's in `gmmap.sim_options`, and re-exported here. The stages
+take their section; the Rust core receives every value it uses from here. This module imports
+nothing heavy (no GTSAM, no Zenoh), so a core install can read, validate and dump a configuration.
+Each field's meaning is its ``#:`` comment, beside it or right above it (`gmmap.config_doc`); plain
+``#`` comments say why.
 """
 
 from __future__ import annotations
@@ -23,8 +24,10 @@ from gmmap.fleet_options import (
     TransportOptions,
 )
 from gmmap.ros_options import RosOptions
+from gmmap.sim_options import SENSORS, SimOptions
 
 __all__ = [
+    "SENSORS",
     "BackendOptions",
     "BuildOptions",
     "LinkOptions",
@@ -43,7 +46,6 @@ __all__ = [
 
 STRATEGIES = ("points", "gmm-merge", "per-frame")
 COVARIANCES = ("diag", "full")
-SENSORS = ("lidar", "depth")
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,10 @@ class BuildOptions:
     18-21), and TUM fr1_xyz against its 10 and 5 Hz second sessions joins at 0.5 cm / 0.26° and
     0.9 cm / 0.44° instead of 2.0 cm / 0.94° and 0.7 cm / 0.73°. Distance and angle 0 or null:
     by frame count alone, the paper's protocol (`by_frames`: its Table I used 5 frames, its
-    simulation 20). Full covariances: registration across robots is more accurate with them
+    simulation 20). ``horizon_band``: each submap also records the free space its frames saw
+    at these heights about its (levelled) anchor, 72 directions from a viewpoint every metre
+    (`gmmap.mapping.frontier`), which registration and verification test matches against.
+    Full covariances: registration across robots is more accurate with them
     (fr1_xyz halves, fast rotation) and the refit after selection produces full ones anyway.
     """
 
@@ -79,6 +84,8 @@ class BuildOptions:
     refine_iter: int = 10  #: EM iterations (full covariances) after selection; 0: none
     holdout: float = 0.0  #: Fraction of buffered points withheld from fitting, for evaluation
     up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  #: Map frame's up; null: no levelling
+    #: Heights (m) about the anchor whose free space each submap records; null: none
+    horizon_band: tuple[float, float] | None = (-0.25, 0.25)
     max_iter: int = 100  #: EM iterations of a submap's fit, at most
     tol: float = 1e-3  #: EM convergence tolerance of a submap's fit
     seed: int = 0  #: Seed of the EM fit and of the holdout draw
@@ -98,6 +105,9 @@ class BuildOptions:
             raise InvalidInputError("holdout must be in [0, 1) and min_novelty in [0, 1]")
         if not self.voxel_size > 0:
             raise InvalidInputError(f"voxel_size must be > 0, got {self.voxel_size}")
+        band = self.horizon_band
+        if band is not None and not (len(band) == 2 and -10 < band[0] < band[1] < 10):
+            raise InvalidInputError(f"horizon_band must be (low, high) within ±10 m, got {band}")
 
     def by_frames(self, frames: int) -> BuildOptions:
         """These options with submaps of ``frames`` accepted frames each, not by space: the
@@ -143,20 +153,21 @@ class RegisterOptions:
     measurement). ``confidence_scale``: the widening under which C is measured, so that it
     reflects shared geometry rather than how sharply each side was fitted.
 
-    ``start_offset`` and ``refine_starts`` widen the global search; they stay off
-    (docs/guide/merging.md, "Which sensors join", says what they gain and cost).
+    A global search starts from the best maxima of translation votes over ``yaw_starts`` yaws
+    (`gmmap.math.register`): two submaps that overlap in part align far from their centroids.
     """
 
     #: From a guess: std devs (m) added to every covariance, coarse to fine
     local_scales: tuple[float, ...] = (0.2, 0.1, 0.05, 0.0)
     #: Without a guess (global search): std devs (m) added, coarse to fine
-    global_scales: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
+    global_scales: tuple[float, ...] = (0.2, 0.1, 0.03, 0.01)
     max_iter: int = 10  #: Levenberg-Marquardt iterations per scale
     # From a guess, scales >= 10 cm (but the last) see the mixtures merged in cells of this
     # many times the scale (`gmmap.math.register`); 0: the whole mixtures at every scale.
     coarse_cell: float = 2.0  #: From a guess, coarse scales merge mixtures in cells of this × scale
-    yaw_starts: int = 12  #: Rotations about +z a global search starts from
-    start_offset: float = 0.0  #: Global search: also start each yaw shifted this far on ±x, ±y (m)
+    yaw_starts: int = 24  #: Rotations about +z a global search tries
+    search_cell: float = 0.5  #: Global search: spacing and blur (m) of its translation votes
+    search_starts: int = 24  #: Global search: the votes' best maxima optimised at the coarse scale
     refine_starts: int = 2  #: Global search: distinct coarse solutions refined to the finest scale
     dof: int = 6  #: Degrees of freedom: 6, or 4 (x, y, z and yaw only: ground robots)
     information_scale: float | None = None  #: Measurements counted; null: smaller component count
@@ -175,10 +186,10 @@ class RegisterOptions:
             raise InvalidInputError("coarse_cell must be finite and >= 0")
         if not (math.isfinite(self.confidence_scale) and self.confidence_scale >= 0):
             raise InvalidInputError("confidence_scale must be finite and >= 0")
-        if self.max_iter < 1 or min(self.yaw_starts, self.refine_starts) < 1:
-            raise InvalidInputError("max_iter, yaw_starts and refine_starts must be >= 1")
-        if not (self.cutoff > 0 and self.tol > 0 and 0 <= self.start_offset < math.inf):
-            raise InvalidInputError("cutoff, tol > 0 and a finite start_offset >= 0")
+        if self.max_iter < 1 or min(self.yaw_starts, self.refine_starts, self.search_starts) < 1:
+            raise InvalidInputError("max_iter, yaw_starts, refine_starts, search_starts: >= 1")
+        if not (self.cutoff > 0 and self.tol > 0 and 0 <= self.search_cell < math.inf):
+            raise InvalidInputError("cutoff, tol > 0 and a finite search_cell >= 0")
         if self.information_scale is not None and not self.information_scale > 0:
             raise InvalidInputError("information_scale must be > 0 (or null)")
 
@@ -452,48 +463,3 @@ class ExploreOptions:
             raise InvalidInputError("explore.replan_s, turn_rate and time_budget must be > 0")
         if self.min_frontier < 1:
             raise InvalidInputError("explore.min_frontier must be >= 1")
-
-
-@dataclass(frozen=True)
-class SimOptions:
-    """The simulator (`gmmap.io.sim`): which world, how many robots, which sensor, how they move.
-
-    ``sensor``: a 16-beam 360° LiDAR over ±``lidar_fov``° of elevation (VLP-16: ±15°; a handheld
-    360° LiDAR: 32-64 beams over ±45°; KITTI-like: ±25°), or a 60° depth camera ``width`` px
-    wide (4:3), whose narrow views alias more. ``sway``: the carrier rolls and pitches by up to
-    this many degrees as a handheld or legged robot does (0: a wheeled robot on a flat floor);
-    its odometry knows the tilt, as an IMU would. ``drift``: the simulated odometry's error per
-    metre driven (and rad per rad turned; `gmmap.math.drift.Drift.per_metre`), which the robots
-    never see. 320 px: the depth demo at that width runs three robots in real time on two cores.
-    ``pace``: None, a robot maps its frames as fast as it can; a number, frame k is due ``k /
-    (rate * pace)`` s after ``start`` (Unix time; None: when the robot starts), so that robots
-    move in step as in the field, however fast each maps (rendezvous links need it).
-    """
-
-    world: str = "office"  #: A built-in world, `random-office:<seed>` or a world .json file
-    robots: int = 3  #: Simulated robots
-    seed: int = 0  #: Seed of the sensor noise and the odometry
-    sensor: str = "lidar"  #: lidar (360° LiDAR) or depth (60° depth camera)
-    width: int = 320  #: Depth camera image width (px, 4:3)
-    beams: int = 16  #: LiDAR channels over ±lidar_fov of elevation
-    lidar_fov: float = 15.0  #: LiDAR elevation field, ± degrees
-    lidar_range: float = 30.0  #: LiDAR maximum range (m)
-    sway: float = 0.0  #: Carrier roll and pitch, up to ± degrees (handheld, legged; 0: flat floor)
-    noise: bool = True  #: Sensor noise (depth or range)
-    rate: float = 5.0  #: Frames per second
-    speed: float = 0.5  #: Driving speed (m/s)
-    drift: float = 0.02  #: Simulated odometry error per metre driven (and rad per rad turned)
-    pace: float | None = None  #: Frames due at this many times the rate; null: as fast as mapped
-    start: float | None = None  #: Unix time paced frames count from; null: when the robot starts
-
-    def __post_init__(self) -> None:
-        if self.pace is not None and not (math.isfinite(self.pace) and self.pace > 0):
-            raise InvalidInputError(f"sim.pace must be > 0 or null, got {self.pace}")
-        if self.sensor not in SENSORS:
-            raise InvalidInputError(f"sim.sensor must be one of {SENSORS}, got {self.sensor!r}")
-        if self.robots < 1 or self.width < 8 or self.beams < 1:
-            raise InvalidInputError("sim.robots >= 1, sim.width >= 8, sim.beams >= 1")
-        if not (self.lidar_range > 0 and self.rate > 0 and self.speed > 0 and self.drift >= 0):
-            raise InvalidInputError("sim.lidar_range, rate, speed > 0 and drift >= 0")
-        if not (0 < self.lidar_fov <= 90 and 0 <= self.sway < 45):
-            raise InvalidInputError("sim.lidar_fov in (0, 90] and sim.sway in [0, 45) degrees")

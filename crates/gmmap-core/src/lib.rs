@@ -13,6 +13,7 @@ pub mod place;
 pub mod raycast;
 pub mod register;
 pub mod rng;
+pub mod search;
 pub mod select;
 pub mod voxel;
 

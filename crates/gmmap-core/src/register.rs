@@ -10,16 +10,16 @@
 //! gradients (H alone where that is not positive), accepted only when F grows.
 //! Coarse to fine: an isotropic variance s² is added to every covariance of both mixtures, for
 //! each s of `scales` in turn, which widens the basin of convergence. Without an initial guess,
-//! `yaw_starts` rotations about +z (gravity), each with the centroids aligned and shifted by
-//! `start_offset` along ±x and ±y, are tried at the coarsest scale; the best `refine_starts`
-//! distinct ones are refined and the basin with the highest C is returned (a start refined
-//! into a basin already held does not replace it; the best distinct other's C is the
-//! `alternative`). C at the end (measured with `confidence_scale` added to all
+//! the `search_starts` best maxima of the translation votes over `yaw_starts` rotations about +z
+//! (gravity; `crate::search`) are optimised at the coarsest scale; the best `refine_starts`
+//! distinct ones are refined and every distinct basin is returned, the highest C first (the
+//! next one's C is the `alternative`). C at the end (measured with `confidence_scale` added to all
 //! covariances) is the geometric confidence; H (scaled) is the information matrix.
 
 use crate::fastmath::exp_nonpos;
 use crate::gmm::Gmm;
 use crate::linalg::Sym3;
+use crate::search::hypotheses;
 use crate::CoreError;
 use rayon::prelude::*;
 
@@ -40,9 +40,12 @@ pub struct RegisterOptions {
     pub four_dof: bool,
     /// Yaw starts tried when there is no initial guess.
     pub yaw_starts: usize,
-    /// Without a guess, each yaw also starts with the centroids this far apart along ±x and
-    /// ±y of the target (units of the means); 0: centroids aligned only.
-    pub start_offset: f64,
+    /// Without a guess or a yaw hint: the spacing (units of the means) of the translation votes
+    /// the starts come from (`crate::search`), also their blur; 0: each yaw starts with the
+    /// centroids aligned.
+    pub search_cell: f64,
+    /// Without a guess: the votes' best maxima optimised at the coarsest scale.
+    pub search_starts: usize,
     /// Without a guess, the distinct coarse solutions refined (the best is returned, the
     /// next best's confidence is the `alternative`).
     pub refine_starts: usize,
@@ -68,7 +71,8 @@ impl Default for RegisterOptions {
             tol: 1e-5,
             four_dof: false,
             yaw_starts: 12,
-            start_offset: 0.0,
+            search_cell: 0.5,
+            search_starts: 24,
             refine_starts: 2,
             cutoff: 4.0,
             information_scale: 1.0,
@@ -123,7 +127,7 @@ impl Pose {
         }
     }
 
-    fn yaw(angle: f64) -> Pose {
+    pub(crate) fn yaw(angle: f64) -> Pose {
         let (s, c) = angle.sin_cos();
         Pose {
             r: [[c, -s, 0.], [s, c, 0.], [0., 0., 1.]],
@@ -146,6 +150,10 @@ pub struct Registration {
     /// (another basin, 30° or 0.5 m away), 0 when every start ends here. Near `confidence`, the
     /// geometry is ambiguous (a corridor seen end for end, a room one over).
     pub alternative: f64,
+    /// Without an initial guess: every distinct refined solution (pose, confidence), best
+    /// first (`transform` leads); with a guess just the solution. A caller holding evidence
+    /// the correlation lacks (free space seen) may prefer a later one.
+    pub basins: Vec<(Pose, f64)>,
 }
 
 fn mat_vec(m: &[[f64; 3]; 3], v: &[f64; 3]) -> [f64; 3] {
@@ -180,7 +188,7 @@ pub fn so3_exp(w: [f64; 3]) -> [[f64; 3]; 3] {
 }
 
 /// R Σ Rᵀ.
-fn rotate_cov(r: &[[f64; 3]; 3], s: &Sym3) -> Sym3 {
+pub(crate) fn rotate_cov(r: &[[f64; 3]; 3], s: &Sym3) -> Sym3 {
     let m = s.to_rows();
     let rm =
         [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| r[i][k] * m[3 * k + j]).sum::<f64>()));
@@ -491,6 +499,36 @@ fn symmetrise(h: &mut [[f64; 6]; 6]) {
 }
 
 impl Problem<'_> {
+    /// Each start optimised at the coarse scale `s2`; the best `refine_starts` distinct
+    /// solutions, best first.
+    fn best_distinct(
+        &self,
+        starts: &[Pose],
+        s2: f64,
+        opts: &RegisterOptions,
+        iterations: &mut usize,
+    ) -> Vec<Pose> {
+        let mut found: Vec<(f64, Pose, usize)> = starts
+            .par_iter()
+            .map(|&start| {
+                let (p, e, it) = self.optimise(start, s2, opts);
+                (e.f, p, it)
+            })
+            .collect();
+        *iterations += found.iter().map(|x| x.2).sum::<usize>();
+        found.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut picked: Vec<Pose> = Vec::new();
+        for (_, p, _) in &found {
+            if picked.len() == opts.refine_starts.max(1) {
+                break;
+            }
+            if picked.iter().all(|q| distinct(p, q)) {
+                picked.push(*p);
+            }
+        }
+        picked
+    }
+
     /// Down the coarse-to-fine ladder from `start`: the pose, the unwidened evaluation with
     /// derivatives (for the information) and the iterations.
     fn refine(&self, start: Pose, scales: &[f64], opts: &RegisterOptions) -> (Pose, Eval, usize) {
@@ -582,8 +620,9 @@ fn validate(g: &Gmm, which: &str) -> Result<(), CoreError> {
     g.prepare().map(|_| ())
 }
 
-/// Registers `source` onto `target`. With `init` = None, searches `yaw_starts` yaws about +z
-/// (or starts near `yaw_hint` when given) with the weighted centroids aligned.
+/// Registers `source` onto `target`. With `init` = None, searches from the best maxima of the
+/// translation votes over `yaw_starts` yaws about +z (`crate::search`), or, with a `yaw_hint`
+/// or no `search_cell`, from yaws (near the hint) with the weighted centroids aligned.
 pub fn register(
     source: &Gmm,
     target: &Gmm,
@@ -603,7 +642,7 @@ pub fn register(
     let mut iterations = 0;
     let mut scales = &opts.scales[..];
     // Coarse solutions, best first: with a guess just the guess.
-    let starts: Vec<Pose> = match init {
+    let solutions: Vec<Pose> = match init {
         Some(mut pose) => {
             // A wide blur sees merged components as it sees their parts, at a fraction of
             // the pairs, and leads to the same basin.
@@ -617,6 +656,23 @@ pub fn register(
             }
             vec![pose]
         }
+        None if yaw_hint.is_none() && opts.search_cell > 0.0 => {
+            let cell = opts.search_cell;
+            let found = hypotheses(
+                source,
+                target,
+                opts.yaw_starts,
+                cell,
+                cell,
+                opts.search_starts,
+            )?;
+            let poses: Vec<Pose> = found
+                .iter()
+                .take(opts.search_starts)
+                .map(|h| h.pose)
+                .collect();
+            problem.best_distinct(&poses, coarse, opts, &mut iterations)
+        }
         None => {
             let yaws: Vec<f64> = match yaw_hint {
                 Some(y) => vec![y, y - 0.5, y + 0.5],
@@ -625,41 +681,16 @@ pub fn register(
                     .collect(),
             };
             let (ms, mt) = (weighted_mean(source), weighted_mean(target));
-            let o = opts.start_offset;
-            let mut shifts = vec![[0.0, 0.0]];
-            if o > 0.0 {
-                shifts.extend([[o, 0.0], [-o, 0.0], [0.0, o], [0.0, -o]]);
-            }
             let poses: Vec<Pose> = yaws
                 .iter()
-                .flat_map(|&yaw| {
-                    shifts.iter().map(move |s| {
-                        let mut pose = Pose::yaw(yaw);
-                        let rm = mat_vec(&pose.r, &ms);
-                        pose.t = [mt[0] - rm[0] + s[0], mt[1] - rm[1] + s[1], mt[2] - rm[2]];
-                        pose
-                    })
+                .map(|&yaw| {
+                    let mut pose = Pose::yaw(yaw);
+                    let rm = mat_vec(&pose.r, &ms);
+                    pose.t = [mt[0] - rm[0], mt[1] - rm[1], mt[2] - rm[2]];
+                    pose
                 })
                 .collect();
-            let mut found: Vec<(f64, Pose, usize)> = poses
-                .par_iter()
-                .map(|&start| {
-                    let (p, e, it) = problem.optimise(start, coarse, opts);
-                    (e.f, p, it)
-                })
-                .collect();
-            iterations += found.iter().map(|x| x.2).sum::<usize>();
-            found.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let mut picked: Vec<Pose> = Vec::new();
-            for (_, p, _) in &found {
-                if picked.len() == opts.refine_starts.max(1) {
-                    break;
-                }
-                if picked.iter().all(|q| distinct(p, q)) {
-                    picked.push(*p);
-                }
-            }
-            picked
+            problem.best_distinct(&poses, coarse, opts, &mut iterations)
         }
     };
     let c2 = opts.confidence_scale * opts.confidence_scale;
@@ -672,25 +703,23 @@ pub fn register(
     let norm = (self_overlap(source) * self_overlap(target)).sqrt();
     let confidence_at = |p: &Pose| (problem.evaluate(p, c2, false).f / norm).clamp(0.0, 1.0);
     // The coarse scale only ranks the starts; the finer scales can reverse the order.
-    let mut refined: Vec<(f64, Pose, Eval)> = Vec::with_capacity(starts.len());
-    for start in &starts {
+    let mut refined: Vec<(f64, Pose, Eval)> = Vec::with_capacity(solutions.len());
+    for start in &solutions {
         let (p, fin, it) = problem.refine(*start, scales, opts);
         iterations += it;
         refined.push((confidence_at(&p), p, fin));
     }
-    // A later basin replaces the one held only where it is distinct and scores higher: two
-    // starts that refine into one basin keep the first's pose.
-    let (mut confidence, mut pose, mut fin) = refined[0];
-    for r in &refined[1..] {
-        if distinct(&r.1, &pose) && r.0 > confidence {
-            (confidence, pose, fin) = *r;
+    // Distinct basins, best first: of two starts that refine into one basin the better one's
+    // pose stands for it.
+    refined.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut basins: Vec<(f64, Pose, Eval)> = Vec::with_capacity(refined.len());
+    for r in refined {
+        if basins.iter().all(|b| distinct(&r.1, &b.1)) {
+            basins.push(r);
         }
     }
-    let alternative = refined
-        .iter()
-        .filter(|r| distinct(&r.1, &pose))
-        .map(|r| r.0)
-        .fold(0.0, f64::max);
+    let (confidence, pose, fin) = basins[0];
+    let alternative = basins.get(1).map_or(0.0, |b| b.0);
     let mut h = fin.h;
     symmetrise(&mut h);
     let scale = if fin.f > 0.0 {
@@ -704,6 +733,7 @@ pub fn register(
         information: h.map(|r| r.map(|v| v * scale)),
         iterations,
         alternative,
+        basins: basins.iter().map(|b| (b.1, b.0)).collect(),
     })
 }
 

@@ -265,13 +265,14 @@ type RegisterOutput<'py> = (
     Bound<'py, PyArray2<f64>>,
     usize,
     f64,
+    Vec<(Bound<'py, PyArray2<f64>>, f64)>,
 );
 
 /// GMM-to-GMM registration: (transform 4x4, confidence, information 6x6, iterations,
-/// the best distinct solution's confidence).
+/// the best distinct solution's confidence, every distinct solution as (4x4, confidence)).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, start_offset, refine_starts, information_scale, confidence_scale, tol, cutoff, coarse_cell, coarse_scale))]
+#[pyo3(signature = (source, target, init, yaw_hint, scales, max_iter, four_dof, yaw_starts, search_cell, search_starts, refine_starts, information_scale, confidence_scale, tol, cutoff, coarse_cell, coarse_scale))]
 fn register_gmm<'py>(
     py: Python<'py>,
     source: (
@@ -290,7 +291,8 @@ fn register_gmm<'py>(
     max_iter: usize,
     four_dof: bool,
     yaw_starts: usize,
-    start_offset: f64,
+    search_cell: f64,
+    search_starts: usize,
     refine_starts: usize,
     information_scale: f64,
     confidence_scale: f64,
@@ -311,7 +313,8 @@ fn register_gmm<'py>(
         max_iter,
         four_dof,
         yaw_starts,
-        start_offset,
+        search_cell,
+        search_starts,
         refine_starts,
         information_scale,
         confidence_scale,
@@ -324,7 +327,17 @@ fn register_gmm<'py>(
     let t = PyArray1::from_vec(py, r.transform.to_matrix().to_vec()).reshape([4, 4])?;
     let info = PyArray1::from_vec(py, r.information.iter().flatten().copied().collect())
         .reshape([6, 6])?;
-    Ok((t, r.confidence, info, r.iterations, r.alternative))
+    let basins = r
+        .basins
+        .iter()
+        .map(|(p, c)| {
+            Ok((
+                PyArray1::from_vec(py, p.to_matrix().to_vec()).reshape([4, 4])?,
+                *c,
+            ))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((t, r.confidence, info, r.iterations, r.alternative, basins))
 }
 
 /// A submap's point buffer: voxel cells with exact centroids (see gmmap-core).

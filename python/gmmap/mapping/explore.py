@@ -22,7 +22,7 @@ horizons saw through it), and on a field of what the sensor saw since the last-b
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -106,7 +106,9 @@ class Explorer:
         self.config = config or Config()
         self.options = self.config.explore
         self.planner_options = self.config.planner
-        self.builder = SubmapBuilder(robot, self.config.build, self.config.select)
+        # Its own horizons, at the heights its body occupies, travel beside each submap.
+        build = replace(self.config.build, horizon_band=None)
+        self.builder = SubmapBuilder(robot, build, self.config.select)
         self.mapper = Mapper(self.config) if share else None
         self.recorder = HorizonRecorder(
             self.options.bins, self.options.horizon_spacing, self.planner_options.z_band

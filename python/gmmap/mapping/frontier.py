@@ -67,17 +67,18 @@ def horizon_from(
     origin: np.ndarray,
     band: tuple[float, float],
     bins: int,
-    floor: float = 0.05,
+    floor: float | None = 0.05,
 ) -> np.ndarray:
     """Free range per direction (NaN: not seen) from ``origin`` (x, y), for (N, 3) points in a
     levelled frame whose z = 0 is the floor: the nearest return in ``band``, else the farthest
-    floor return (z under ``floor``); returns above the band say nothing about it."""
+    floor return (z under ``floor``; None: where the floor is is unknown, and a direction
+    without a return in the band is not seen); returns above the band say nothing about it."""
     p = np.asarray(points_xyz, dtype=np.float64)
     d = p[:, :2] - origin
     r = np.hypot(d[:, 0], d[:, 1])
     b = (np.floor(np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins).astype(int)) % bins
     out = np.full(bins, np.nan)
-    low = p[:, 2] < max(floor, band[0])
+    low = p[:, 2] < (-np.inf if floor is None else max(floor, band[0]))
     hit = (p[:, 2] >= band[0]) & (p[:, 2] <= band[1]) & ~low
     if low.any():
         far = np.zeros(bins)
@@ -130,18 +131,28 @@ def clear_lines(space, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def seen_through(
-    horizons: Sequence[Horizon], anchor: np.ndarray, gmm: Gmm, band: tuple[float, float]
+    horizons: Sequence[Horizon],
+    anchor: np.ndarray,
+    gmm: Gmm,
+    band: tuple[float, float],
+    reach: float = 0.0,
 ) -> float:
-    """The share of ``gmm``'s weight in ``band`` (components by their means; ``gmm`` in the
-    frame of ``anchor``, the pose of the submap the horizons belong to) that lies inside
-    those horizons by `SEEN_MARGIN`: surfaces where that robot's rays went through. A
+    """The share of ``gmm``'s weight in ``band`` (components by their means, or within
+    ``reach`` vertical standard deviations of it; ``gmm`` in the frame of ``anchor``, the pose
+    of the submap the horizons belong to) that lies inside those horizons by `SEEN_MARGIN`:
+    surfaces where that robot's rays went through. A
     component counts when its mean and the points 1 sigma either way along its longest
     horizontal axis do: EM spans a doorway with one component of the wall, whose mean lies
     in the doorway (random-office:101, 16-beam LiDAR: by means alone, 27 of 168 right
     matches put over 2 % there)."""
     R, t = anchor[:3, :3], anchor[:3, 3]
     means = gmm.means @ R.T + t
-    level = (means[:, 2] >= band[0]) & (means[:, 2] <= band[1])
+    if reach > 0:
+        up = R[2] @ gmm.covariances @ R[2]  # each component's vertical variance
+        half = reach * np.sqrt(np.maximum(up, 0.0))
+        level = (means[:, 2] + half >= band[0]) & (means[:, 2] - half <= band[1])
+    else:
+        level = (means[:, 2] >= band[0]) & (means[:, 2] <= band[1])
     total = float(gmm.weights[level].sum())
     if not horizons or total <= 0:
         return 0.0
@@ -176,21 +187,26 @@ def decode_horizons(data: bytes) -> list[Horizon]:
 class HorizonRecorder:
     """The horizons of a robot's path since its last submap, in its map frame."""
 
-    def __init__(self, bins: int, spacing: float, band: tuple[float, float]) -> None:
-        self.bins, self.spacing, self.band = bins, spacing, band
+    def __init__(
+        self, bins: int, spacing: float, band: tuple[float, float], floor: float | None = 0.05
+    ) -> None:
+        self.bins, self.spacing, self.band, self.floor = bins, spacing, band, floor
         self.closed: list[Horizon] = []
         self.current: Horizon | None = None
 
     def add(self, frame: Frame) -> None:
-        pose = frame.pose
-        pts = np.asarray(frame.points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
+        self.observe(frame.points, frame.pose)
+
+    def observe(self, points: np.ndarray, pose: np.ndarray) -> None:
+        """Sensor-frame ``points`` seen from ``pose`` (into this recorder's frame)."""
+        pts = np.asarray(points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
         origin = pose[:2, 3].copy()
         if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
             self.closed.append(self.current)
             self.current = None
         if self.current is None:
             self.current = Horizon(origin, np.full(self.bins, np.nan))
-        seen = horizon_from(pts, self.current.origin, self.band, self.bins)
+        seen = horizon_from(pts, self.current.origin, self.band, self.bins, self.floor)
         self.current.ranges = merge_ranges(self.current.ranges, seen)
 
     def all(self) -> list[Horizon]:

@@ -48,6 +48,12 @@ from gmmap.math.register import Registration, register
 
 Node = tuple[str, int]
 Progress = Callable[[str], None]
+REACH = 2.0  # vertical standard deviations by which a surface reaches a built submap's rays
+RAY_BAND = 0.05  # metres about the middle of a built submap's horizon band its rays are taken at
+# Metres to which a built submap's horizons are trusted: farther, a 5° direction is wider than a
+# pole or a door jamb its rays passed by. On the simulated office (seed 0), 4 m refuses 2-7 % of
+# right alignments and catches 74-85 % of wrong ones on every sensor; uncapped 10-16 % and 69-97 %.
+FREE_RANGE = 4.0
 
 
 class Mapper:
@@ -135,27 +141,79 @@ class Mapper:
         key = ((s.robot, s.seq), (c.robot, c.seq))
         reg = self._registrations.get(key)
         if reg is None:
-            m = self.db.verify(s.robot, s.seq, s.gmm, c)
-            self._registrations[key] = m.registration
-            return m
+            with self._lock:
+                target = self.submaps[key[1]].gmm
+            reg = self._free_basin(s, key[1], self.db.register_pair(s.gmm, target))
+            self._registrations[key] = reg
         return self.db.judge(key[0], c, reg)
+
+    def _free_basin(self, query: Submap, key: Node, reg: Registration) -> Registration:
+        """``reg`` with the basins that put more than ``max_seen_through`` of either submap's
+        surfaces where the other's robot saw free space dropped (both with free space known):
+        the best one left leads and the next one left is the alternative. Where alike places
+        score higher than the right alignment, the wrong ones fill what was seen free."""
+        limit = self.config.place.max_seen_through
+        if limit is None or not reg.basins or self._seen_through(query, key, None) is None:
+            return reg
+        free = [b for b in reg.basins if self._seen_through(query, key, b[0]) <= limit]
+        if not free:
+            return reg
+        alternative = free[1][1] if len(free) > 1 else 0.0
+        if free[0][0] is reg.basins[0][0]:
+            return replace(reg, alternative_confidence=alternative, basins=tuple(free))
+        with self._lock:
+            target = self.submaps[key].gmm
+        # Its information and confidence where it ends, at the search's finest scale.
+        scale = self.config.register.global_scales[-1:]
+        r = register(query.gmm, target, free[0][0], scales=scale, options=self.config.register)
+        return replace(
+            r,
+            iterations=reg.iterations + r.iterations,
+            time_s=reg.time_s + r.time_s,
+            alternative_confidence=alternative,
+            basins=tuple(free),
+        )
+
+    def _free_view(self, key: Node) -> tuple[list[Horizon], np.ndarray, tuple, float] | None:
+        """The free space held submap ``key``'s robot saw: its horizons (anchor frame), the
+        anchor, the heights (map frame) they hold and the `seen_through` reach; None where
+        unknown. An exploring robot's (given to `add`) are at the heights its body occupies, a
+        built submap's about its anchor."""
+        with self._lock:
+            s, given = self.submaps[key], self.horizons.get(key)
+        if given is not None:
+            return given, s.anchor, self.config.planner.z_band, 0.0
+        if s.horizons is None or s.horizon_band is None:
+            return None
+        # Its rays ran about the sensor's height: a surface counts where it spans that height
+        # (a table top under the rays does not).
+        z = float(s.anchor[2, 3]) + sum(s.horizon_band) / 2
+        near = [Horizon(h.origin, np.minimum(h.ranges, FREE_RANGE)) for h in s.horizons]
+        return near, s.anchor, (z - RAY_BAND, z + RAY_BAND), REACH
+
+    def _seen_through(self, query: Submap, key: Node, T: np.ndarray | None) -> float | None:
+        """The larger share of either submap's surfaces (query's moved by ``T`` onto held
+        submap ``key``) inside the free space the other's robot saw; None where either's free
+        space is unknown, 0 for ``T`` None when both are known."""
+        mine, theirs = self._free_view((query.robot, query.seq)), self._free_view(key)
+        if mine is None or theirs is None or T is None:
+            return None if mine is None or theirs is None else 0.0
+        with self._lock:
+            candidate = self.submaps[key].gmm
+        return max(
+            seen_through(*mine[:2], candidate.transform(np.linalg.inv(T)), *mine[2:]),
+            seen_through(*theirs[:2], query.gmm.transform(T), *theirs[2:]),
+        )
 
     def _unseen(self, query: Submap, m: Match) -> Match:
         """``m`` refused where it puts more than ``max_seen_through`` of either submap's
-        surfaces inside the free space the other's robot saw (both with horizons held): a
-        wall where rays went through, as a place alike turned round gives."""
+        surfaces inside the free space the other's robot saw (both known): a wall where rays
+        went through, as a place alike turned round gives."""
         limit = self.config.place.max_seen_through
         key = (m.candidate.robot, m.candidate.seq)
-        with self._lock:
-            mine, theirs = self.horizons.get((query.robot, query.seq)), self.horizons.get(key)
-            if limit is None or mine is None or theirs is None:
-                return m
-            candidate = self.submaps[key]
-        T, band = m.registration.transform, self.config.planner.z_band
-        share = max(
-            seen_through(mine, query.anchor, candidate.gmm.transform(np.linalg.inv(T)), band),
-            seen_through(theirs, candidate.anchor, query.gmm.transform(T), band),
-        )
+        share = None if limit is None else self._seen_through(query, key, m.registration.transform)
+        if share is None:
+            return m
         return replace(m, accepted=share <= limit, seen_through=share)
 
     def _unconfused(self, m: Match) -> Match:

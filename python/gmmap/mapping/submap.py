@@ -35,6 +35,7 @@ import numpy as np
 from gmmap import _core
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.frame import Frame
+from gmmap.mapping.frontier import Horizon, HorizonRecorder, code_ranges, range_codes
 from gmmap.math.em import fit_gmm
 from gmmap.math.fileio import load_npz, save_npz
 from gmmap.math.gmm import Gmm
@@ -44,6 +45,10 @@ from gmmap.options import BuildOptions, SelectOptions
 
 FILE_FORMAT = "gmmap submap"
 FILE_VERSION = 1
+# A submap's free-space horizons: every 5° from a viewpoint every metre of path, as exploring
+# robots' (`gmmap.options.ExploreOptions`).
+HORIZON_BINS = 72
+HORIZON_SPACING = 1.0
 
 
 @dataclass
@@ -55,7 +60,8 @@ class Submap:
     in the dataset's world frame when the frames carry one. ``stamps``: a built submap's are its
     first and last frames' (one, for one frame), the anchor's and where it ends; the frames in
     between would cost 4 bytes each on the wire and no receiver could use them, their poses
-    not being sent.
+    not being sent. ``horizons``: the free space its frames saw (`gmmap.mapping.frontier`), in
+    the anchor frame, at the heights ``horizon_band`` about the anchor; None where not recorded.
     """
 
     robot: str
@@ -67,6 +73,8 @@ class Submap:
     points: np.ndarray | None = None
     gt_anchor: np.ndarray | None = None
     stats: dict = field(default_factory=dict)
+    horizons: list[Horizon] | None = None
+    horizon_band: tuple[float, float] | None = None
 
     def save(self, path: str | os.PathLike, with_points: bool = True) -> None:
         arrays = dict(
@@ -82,6 +90,12 @@ class Submap:
             arrays["gt_anchor"] = self.gt_anchor
         if with_points and self.points is not None:
             arrays["points"] = self.points.astype(np.float32)
+        if self.horizons is not None and self.horizon_band is not None:
+            arrays["horizon_band"] = np.array(self.horizon_band, dtype=np.float64)
+            arrays["horizon_origins"] = np.array([h.origin for h in self.horizons]).reshape(-1, 2)
+            arrays["horizon_codes"] = np.array(
+                [range_codes(h.ranges) for h in self.horizons], dtype=np.uint8
+            ).reshape(len(self.horizons), -1)
         save_npz(path, FILE_FORMAT, FILE_VERSION, arrays)
 
     @classmethod
@@ -97,7 +111,17 @@ class Submap:
             d.get("points"),
             d.get("gt_anchor"),
             json.loads(str(d["stats"])),
+            *_load_horizons(d),
         )
+
+
+def _load_horizons(d) -> tuple[list[Horizon] | None, tuple[float, float] | None]:
+    """A saved submap's horizons and their band; (None, None) where it has none."""
+    if "horizon_band" not in d:
+        return None, None
+    low, high = (float(v) for v in d["horizon_band"])
+    origins, codes = d["horizon_origins"], d["horizon_codes"]
+    return [Horizon(o, code_ranges(c)) for o, c in zip(origins, codes, strict=True)], (low, high)
 
 
 def level(pose: np.ndarray, up: np.ndarray | None) -> np.ndarray:
@@ -138,6 +162,12 @@ class SubmapBuilder:
         self.gt_anchor: np.ndarray | None = None
         self.stamps: list[float] = []
         self.frame_gmms: list[Gmm] = []
+        band = self.options.horizon_band
+        self.horizons = (
+            HorizonRecorder(HORIZON_BINS, HORIZON_SPACING, band, floor=None)
+            if band is not None and self.options.up is not None
+            else None
+        )
         self.busy_s = 0.0
         self.travelled = 0.0  # metres of odometry path since the submap began
         self.turned = 0.0  # degrees turned since the submap began
@@ -158,6 +188,8 @@ class SubmapBuilder:
                 self.gt_anchor = frame.gt_pose @ np.linalg.inv(frame.pose) @ self.anchor
         T = np.linalg.inv(self.anchor) @ frame.pose
         points = np.ascontiguousarray(frame.points, dtype=np.float32)
+        if self.horizons is not None:
+            self.horizons.observe(points, T)
         novelty = self.options.min_novelty if len(self.buffer) else 0.0
         try:
             _, _, accepted = self.buffer.offer(points, T, novelty)
@@ -271,6 +303,8 @@ class SubmapBuilder:
             points,
             self.gt_anchor,
             stats,
+            None if self.horizons is None else self.horizons.all(),
+            None if self.horizons is None else self.options.horizon_band,
         )
         self.seq += 1
         self._reset()

@@ -11,11 +11,13 @@ fraction of the components and the same end point (benchmarks/registration.py,
 C at the solution, measured with ``confidence_scale`` (5 cm) added to every covariance so it
 reflects the shared geometry rather than how sharply each side was fitted, is the geometric
 confidence (1: the mixtures coincide; nearly independent of the component counts). Without
-``init`` the search starts from ``yaw_starts`` rotations about +z (robots share gravity, not
-heading) with the centroids aligned, or near ``yaw_hint``; ``start_offset`` adds starts with
-the centroids that far apart along ±x and ±y, and the best ``refine_starts`` distinct coarse
-solutions are refined (the best is returned, the next best distinct one's C is the
-``alternative_confidence``).
+``init`` the search covers ``yaw_starts`` rotations about +z (robots share gravity, not
+heading): for each, every pair of components votes for the translation that lays one on the
+other, on a grid of ``search_cell``, and the votes' ``search_starts`` best maxima over all yaws
+are optimised at the coarsest scale (`gmmap_core::search`; near ``yaw_hint``, or with
+``search_cell`` 0, the yaws start with the centroids aligned instead). The best
+``refine_starts`` distinct coarse solutions are refined; every distinct one comes back in
+``basins``, the best first (the next one's C is the ``alternative_confidence``).
 """
 
 from __future__ import annotations
@@ -53,6 +55,9 @@ class Registration:
     # Without ``init``: the confidence of the best solution in another basin (30° or 0.5 m
     # away), 0 if none. Close to ``confidence``: ambiguous geometry (a corridor end for end).
     alternative_confidence: float = 0.0
+    # Without ``init``: every distinct solution found, (transform, confidence), best first
+    # (this one leads); with ``init`` just this one.
+    basins: tuple[tuple[np.ndarray, float], ...] = ()
 
     @property
     def conditioning(self) -> float:
@@ -102,7 +107,7 @@ def register(
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
     scale = float(o.information_scale or min(len(source), len(target)))
     start = time.perf_counter()
-    T, confidence, info, iterations, alternative = _core.register_gmm(
+    T, confidence, info, iterations, alternative, basins = _core.register_gmm(
         (source.weights, source.means, source.covariances),
         (target.weights, target.means, target.covariances),
         init,
@@ -111,7 +116,8 @@ def register(
         int(o.max_iter),
         o.dof == 4,
         int(o.yaw_starts),
-        float(o.start_offset),
+        float(o.search_cell),
+        int(o.search_starts),
         int(o.refine_starts),
         scale,
         float(o.confidence_scale),
@@ -121,7 +127,10 @@ def register(
         COARSE_SCALE,
     )
     elapsed = time.perf_counter() - start
-    return Registration(T, float(confidence), info, int(iterations), elapsed, float(alternative))
+    basins = tuple((B, float(c)) for B, c in basins)
+    return Registration(
+        T, float(confidence), info, int(iterations), elapsed, float(alternative), basins
+    )
 
 
 def confidence(

@@ -77,14 +77,17 @@ from gmmap.fleet.wire.quantise import (
     _rotation,
     _unmorton,
 )
+from gmmap.mapping.frontier import Horizon, code_ranges, range_codes
 from gmmap.math.gmm import Gmm
 
 if TYPE_CHECKING:
     from gmmap.mapping.submap import Submap
 
 MAGIC = b"GMMW"
-VERSION = 2
-READABLE = (1, 2)  # version 1 differs only in the anchor: its entry codes, without a form byte
+VERSION = 3
+# Version 1 differs from 2 only in the anchor (its entry codes, without a form byte); version 2
+# from 3 in the free-space block, which it lacks.
+READABLE = (1, 2, 3)
 KIND_GMM, KIND_SUBMAP = 1, 2
 COMPRESSION_NONE, COMPRESSION_ZSTD = 0, 1
 DEFAULT_DISTORTION = 1e-3  # expected KL divergence (nats) per parameter, over all components
@@ -94,6 +97,9 @@ MAX_MESSAGE = MAX_BODY + 64
 MAX_COMPONENTS = 65535
 MAX_STAMPS = 65535
 MAX_ROBOT_BYTES = 255
+MAX_HORIZONS = 1024  # viewpoints per submap
+HORIZON_BINS = (8, 720)  # directions per viewpoint, least and most
+MAX_HORIZON_CM = 32767  # |coordinate| of a viewpoint, and |height| of the band, in cm
 MAX_WEIGHT_INDEX = 1 << 24  # n; with n ≤ 2^24 every step below stays representable
 MAX_LOG_STD = 80.0  # |log σ| (σ in metres): e^80 ≈ 5e34 is far outside any map
 MAX_GAP = 1 << 40  # log-std gaps, in steps
@@ -234,6 +240,7 @@ def _submap_fields(s: Submap) -> bytes:
     w.uvarint(n_points)
     _write_stamps(w, s.stamps)
     write_anchor(w, s.anchor)
+    _write_horizons(w, s.horizons, s.horizon_band)
     return bytes(w.buf)
 
 
@@ -249,7 +256,51 @@ def _read_submap_fields(r: _Reader, version: int) -> dict:
         "n_points": r.uvarint("n_points", (1 << 63) - 1),
         "stamps": _read_stamps(r),
         "anchor": read_anchor(r) if version >= 2 else read_anchor_entries(r),
+        **(_read_horizons(r) if version >= 3 else {}),
     }
+
+
+def _write_horizons(w: _Writer, horizons: list | None, band: tuple | None) -> None:
+    """The free-space block: the viewpoint count (0: none recorded), then the band's heights
+    and each viewpoint in cm and the bins, and per viewpoint its x, y and one code per bin
+    (`gmmap.mapping.frontier.range_codes`)."""
+    if not horizons or band is None:
+        w.uvarint(0)
+        return
+    bins = len(horizons[0].ranges)
+    if len(horizons) > MAX_HORIZONS or not HORIZON_BINS[0] <= bins <= HORIZON_BINS[1]:
+        raise InvalidInputError(f"at most {MAX_HORIZONS} horizons of {HORIZON_BINS} bins each")
+    if any(len(h.ranges) != bins for h in horizons):
+        raise InvalidInputError("every horizon of a submap has the same number of bins")
+    w.uvarint(len(horizons))
+    for v in (*band, *(c for h in horizons for c in h.origin)):
+        if not abs(v) * 100 <= MAX_HORIZON_CM:
+            raise InvalidInputError(f"horizon height or viewpoint {v} m out of range")
+    for v in band:
+        w.svarint(round(v * 100))
+    w.uvarint(bins)
+    for h in horizons:
+        w.svarint(round(h.origin[0] * 100))
+        w.svarint(round(h.origin[1] * 100))
+        w.raw(range_codes(h.ranges).tobytes())
+
+
+def _read_horizons(r: _Reader) -> dict:
+    n = r.uvarint("horizon count", MAX_HORIZONS)
+    if n == 0:
+        return {"horizons": None, "horizon_band": None}
+    band = tuple(r.svarint("horizon band", MAX_HORIZON_CM) / 100 for _ in range(2))
+    if not band[0] < band[1]:
+        raise DecodeError(f"horizon band {band} is not (low, high)")
+    bins = r.uvarint("horizon bins", HORIZON_BINS[1])
+    if bins < HORIZON_BINS[0]:
+        raise DecodeError(f"{bins} horizon bins, fewer than {HORIZON_BINS[0]}")
+    horizons = []
+    for _ in range(n):
+        origin = np.array([r.svarint("viewpoint", MAX_HORIZON_CM) / 100 for _ in range(2)])
+        codes = np.frombuffer(r.take(bins, "horizon codes"), dtype=np.uint8)
+        horizons.append(Horizon(origin, code_ranges(codes)))
+    return {"horizons": horizons, "horizon_band": band}
 
 
 def _write_stamps(w: _Writer, stamps: object) -> None:

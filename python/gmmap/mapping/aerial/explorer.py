@@ -26,7 +26,7 @@ seen since the last-but-one submap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -78,7 +78,9 @@ class AerialExplorer:
         self.robot = robot
         self.config = config or Config()
         self.options, self.planner_options = self.config.explore, self.config.planner
-        self.builder = SubmapBuilder(robot, self.config.build, self.config.select)
+        # Its sphere horizons stand for the free space it saw; no level band would.
+        build = replace(self.config.build, horizon_band=None)
+        self.builder = SubmapBuilder(robot, build, self.config.select)
         self.recorder = SphereRecorder(swept, reach, self.options.horizon_spacing)
         self.submaps: list[SphereSubmap] = []
         self.route: Route | None = None
