@@ -14,8 +14,9 @@ seed, and per real cross-session case, through `gmmap.eval.sessions.evaluate_ses
   path (all robots' submaps over all robots' paths), ``eval_time_per_candidate_s``
   (the whole evaluation per candidate: the merge, the GICP baseline and the floor);
 - ``no_guess``: registration with no initial guess on the pairs that overlap, right and time per
-  pair, gmmap's beside KISS-Matcher's on the same pairs, and gmmap's started at the truth (the
-  most any search on its objective can reach; `gmmap.eval.noguess`).
+  pair, gmmap's beside KISS-Matcher's on the same pairs, gmmap's as verification registers (its
+  solutions that fill seen free space dropped), and gmmap's started at the truth (the most any
+  search on its objective can reach; `gmmap.eval.noguess`).
 
 Setups: ``lidar16`` (16 beams over ±15°, 5 Hz, a wheeled robot), ``lidar360_2hz`` and
 ``lidar360_10hz`` (32 beams over ±45°, 10° of roll and pitch: a handheld 360° LiDAR),
@@ -170,7 +171,7 @@ def totals(runs: list[dict]) -> dict:
     total["precision"] = right / total["verified"] if total["verified"] else None
     total["recall"] = right / total["positives"] if total["positives"] else None
     pairs = sum(r["no_guess"]["pairs"] for r in runs)
-    for method in ("gmmap", "from_truth", "kiss_matcher"):
+    for method in ("gmmap", "gmmap_free_space", "from_truth", "kiss_matcher"):
         done = [r["no_guess"][method] for r in runs if "right" in r["no_guess"][method]]
         total[f"no_guess_{method}"] = {
             "right": sum(d["right"] for d in done) if done else None,

@@ -214,6 +214,7 @@ def test_eval_merge_reports_sessions_against_truth():
     assert 0.0 <= report["probability_brier"] < 0.25  # better than a coin on right matches
     no_guess = report["no_guess"]
     assert no_guess["pairs"] >= 1 and no_guess["gmmap"]["right"] >= 1
+    assert no_guess["gmmap_free_space"]["right"] >= 1
     assert no_guess["from_truth"]["right"] >= 1  # started at the truth, it stays there
     baseline = no_guess["kiss_matcher"]
     assert "right" in baseline or "not installed" in baseline["skipped"]

@@ -126,8 +126,8 @@ def verify_gmm(source: Submap, target: Submap, db: PlaceDatabase) -> tuple[float
 
 
 def verify_gicp(source: Submap, target: Submap, voxel: float, yaw_starts: int = 12):
-    """GICP from the same yaw starts as the GMM search (centroids aligned); the best inlier
-    fraction is the confidence."""
+    """GICP from ``yaw_starts`` yaws about +z with the centroids aligned (points have no
+    translation votes); the best inlier fraction is the confidence."""
     import small_gicp
 
     threads = os.cpu_count() or 1

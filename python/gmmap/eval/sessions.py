@@ -72,7 +72,7 @@ def evaluate_sessions(
         out["gicp"] = gicp_verification(mapper.matches, held, pos, index, out["positives"])
         voxel = (config or Config()).build.voxel_size
         out["floor"] = floor(mapper.matches, held, pos, index, voxel)
-        out["no_guess"] = no_guess([held[k] for k in order], pos, mapper.db)
+        out["no_guess"] = no_guess([held[k] for k in order], pos, mapper)
     return out
 
 

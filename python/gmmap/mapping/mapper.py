@@ -141,11 +141,15 @@ class Mapper:
         key = ((s.robot, s.seq), (c.robot, c.seq))
         reg = self._registrations.get(key)
         if reg is None:
-            with self._lock:
-                target = self.submaps[key[1]].gmm
-            reg = self._free_basin(s, key[1], self.db.register_pair(s.gmm, target))
-            self._registrations[key] = reg
+            reg = self._registrations[key] = self.register_pair(s, key[1])
         return self.db.judge(key[0], c, reg)
+
+    def register_pair(self, query: Submap, key: Node) -> Registration:
+        """What verification registers ``query`` onto held submap ``key`` with: no initial
+        guess, then the basins that fill either robot's seen free space dropped."""
+        with self._lock:
+            target = self.submaps[key].gmm
+        return self._free_basin(query, key, self.db.register_pair(query.gmm, target))
 
     def _free_basin(self, query: Submap, key: Node, reg: Registration) -> Registration:
         """``reg`` with the basins that put more than ``max_seen_through`` of either submap's
