@@ -303,12 +303,18 @@ class SubmapBuilder:
             points,
             self.gt_anchor,
             stats,
-            None if self.horizons is None else self.horizons.all(),
-            None if self.horizons is None else self.options.horizon_band,
+            *self._seen(),
         )
         self.seq += 1
         self._reset()
         return submap
+
+    def _seen(self) -> tuple[list[Horizon] | None, tuple[float, float] | None]:
+        """The horizons that saw anything, and their band; (None, None) where none did (a
+        camera looking down at a desk has no return at its own height)."""
+        views = [] if self.horizons is None else self.horizons.all()
+        views = [h for h in views if not np.isnan(h.ranges).all()]
+        return (views, self.options.horizon_band) if views else (None, None)
 
 
 def select_and_refine(
