@@ -73,21 +73,21 @@ def horizon_from(
     levelled frame whose z = 0 is the floor: the nearest return in ``band``, else the farthest
     floor return (z under ``floor``; None: where the floor is is unknown, and a direction
     without a return in the band is not seen); returns above the band say nothing about it."""
-    p = np.asarray(points_xyz, dtype=np.float64)
-    d = p[:, :2] - origin
-    r = np.hypot(d[:, 0], d[:, 1])
-    b = (np.floor(np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins).astype(int)) % bins
+    z = np.asarray(points_xyz)[:, 2]
+    low = z < (-np.inf if floor is None else max(floor, band[0]))
+    hit = (z >= band[0]) & (z <= band[1]) & ~low
     out = np.full(bins, np.nan)
-    low = p[:, 2] < (-np.inf if floor is None else max(floor, band[0]))
-    hit = (p[:, 2] >= band[0]) & (p[:, 2] <= band[1]) & ~low
-    if low.any():
-        far = np.zeros(bins)
-        np.maximum.at(far, b[low], r[low])
-        out[far > 0] = far[far > 0]
-    if hit.any():
-        near = np.full(bins, np.inf)
-        np.minimum.at(near, b[hit], r[hit])
-        out[np.isfinite(near)] = near[np.isfinite(near)]
+    # Directions and ranges of the returns that say something only: a depth camera's frame is
+    # 300,000 points, a few percent of them in the band.
+    for which, fill, reduce in ((low, 0.0, np.maximum), (hit, np.inf, np.minimum)):
+        if not which.any():
+            continue
+        d = np.asarray(points_xyz, dtype=np.float64)[which, :2] - origin
+        b = np.floor(np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins).astype(int) % bins
+        best = np.full(bins, fill)
+        reduce.at(best, b, np.hypot(d[:, 0], d[:, 1]))
+        seen = (best > 0) & np.isfinite(best)
+        out[seen] = best[seen]
     return out
 
 
