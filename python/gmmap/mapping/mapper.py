@@ -52,7 +52,7 @@ REACH = 2.0  # vertical standard deviations by which a surface reaches a built s
 RAY_BAND = 0.05  # metres about the middle of a built submap's horizon band its rays are taken at
 # Metres to which a built submap's horizons are trusted: farther, a 5° direction is wider than a
 # pole or a door jamb its rays passed by. On the simulated office (seed 0), 4 m refuses 2-7 % of
-# right alignments and catches 74-85 % of wrong ones on every sensor; uncapped 10-16 % and 69-97 %.
+# right alignments and catches 60-85 % of wrong ones (each sensor); uncapped 11-35 % and 69-100 %.
 FREE_RANGE = 4.0
 
 
