@@ -157,7 +157,7 @@ class Mapper:
         the best one left leads and the next one left is the alternative. Where alike places
         score higher than the right alignment, the wrong ones fill what was seen free."""
         limit = self.config.place.max_seen_through
-        if limit is None or not reg.basins or self._seen_through(query, key, None) is None:
+        if limit is None or not reg.basins or self._seen_through(query, key, reg.transform) is None:
             return reg
         free = [b for b in reg.basins if self._seen_through(query, key, b[0]) <= limit]
         if not free:
@@ -195,13 +195,13 @@ class Mapper:
         near = [Horizon(h.origin, np.minimum(h.ranges, FREE_RANGE)) for h in s.horizons]
         return near, s.anchor, (z - RAY_BAND, z + RAY_BAND), REACH
 
-    def _seen_through(self, query: Submap, key: Node, T: np.ndarray | None) -> float | None:
+    def _seen_through(self, query: Submap, key: Node, T: np.ndarray) -> float | None:
         """The larger share of either submap's surfaces (query's moved by ``T`` onto held
         submap ``key``) inside the free space the other's robot saw; None where either's free
-        space is unknown, 0 for ``T`` None when both are known."""
+        space is unknown."""
         mine, theirs = self._free_view((query.robot, query.seq)), self._free_view(key)
-        if mine is None or theirs is None or T is None:
-            return None if mine is None or theirs is None else 0.0
+        if mine is None or theirs is None:
+            return None
         with self._lock:
             candidate = self.submaps[key].gmm
         return max(
