@@ -112,6 +112,19 @@ fn peaks(
         }
     }
     blur_grid(&mut grid, dims, blur / cell);
+    local_maxima(&grid, dims, per_yaw)
+        .into_iter()
+        .map(|(score, idx)| {
+            let mut pose = rotation;
+            pose.t = [0, 1, 2].map(|a| origin[a] + idx[a] as f64 * cell);
+            Hypothesis { pose, score }
+        })
+        .collect()
+}
+
+/// The `keep` highest cells above all 26 neighbours (ties to the first), best first.
+fn local_maxima(grid: &[f64], dims: [usize; 3], keep: usize) -> Vec<(f64, [usize; 3])> {
+    let at = |x: usize, y: usize, z: usize| (x * dims[1] + y) * dims[2] + z;
     let mut found: Vec<(f64, [usize; 3])> = Vec::new();
     for x in 1..dims[0] - 1 {
         for y in 1..dims[1] - 1 {
@@ -121,9 +134,8 @@ fn peaks(
                     continue;
                 }
                 let peak = (0..27).filter(|&n| n != 13).all(|n| {
-                    let (dx, dy, dz) = (n / 9, (n / 3) % 3, n % 3);
-                    grid[at(x + dx - 1, y + dy - 1, z + dz - 1)] < v
-                        || (grid[at(x + dx - 1, y + dy - 1, z + dz - 1)] == v && n > 13)
+                    let w = grid[at(x + n / 9 - 1, y + (n / 3) % 3 - 1, z + n % 3 - 1)];
+                    w < v || (w == v && n > 13)
                 });
                 if peak {
                     found.push((v, [x, y, z]));
@@ -132,15 +144,8 @@ fn peaks(
         }
     }
     found.sort_by(|a, b| b.0.total_cmp(&a.0));
-    found.truncate(per_yaw);
+    found.truncate(keep);
     found
-        .into_iter()
-        .map(|(score, idx)| {
-            let mut pose = rotation;
-            pose.t = [0, 1, 2].map(|a| origin[a] + idx[a] as f64 * cell);
-            Hypothesis { pose, score }
-        })
-        .collect()
 }
 
 /// Separable Gaussian blur of standard deviation `sigma` cells, truncated at 3 sigma.
