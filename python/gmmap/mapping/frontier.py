@@ -137,14 +137,13 @@ def seen_through(
     band: tuple[float, float],
     reach: float = 0.0,
 ) -> float:
-    """The share of ``gmm``'s weight in ``band`` (components by their means, or within
-    ``reach`` vertical standard deviations of it; ``gmm`` in the frame of ``anchor``, the pose
-    of the submap the horizons belong to) that lies inside those horizons by `SEEN_MARGIN`:
-    surfaces where that robot's rays went through. A
-    component counts when its mean and the points 1 sigma either way along its longest
-    horizontal axis do: EM spans a doorway with one component of the wall, whose mean lies
-    in the doorway (random-office:101, 16-beam LiDAR: by means alone, 27 of 168 right
-    matches put over 2 % there)."""
+    """The share of ``gmm``'s weight in ``band`` (components by their means, or within ``reach``
+    vertical standard deviations of it; ``gmm`` in the frame of ``anchor``, the pose of the
+    submap the horizons belong to) that lies inside those horizons by `SEEN_MARGIN`: surfaces
+    where that robot's rays went through. A component counts when its mean and the points 1
+    sigma either way along its longest horizontal axis do: EM spans a doorway with one component
+    of the wall, whose mean lies in the doorway (random-office:101, 16-beam LiDAR: by means
+    alone, 27 of 168 right matches put over 2 % there)."""
     R, t = anchor[:3, :3], anchor[:3, 3]
     means = gmm.means @ R.T + t
     if reach > 0:
@@ -185,7 +184,8 @@ def decode_horizons(data: bytes) -> list[Horizon]:
 
 
 class HorizonRecorder:
-    """The horizons of a robot's path since its last submap, in its map frame."""
+    """The horizons of a robot's path since its last submap, in the frame of the poses it is
+    given (an exploring robot's map frame, or a submap's anchor frame)."""
 
     def __init__(
         self, bins: int, spacing: float, band: tuple[float, float], floor: float | None = 0.05

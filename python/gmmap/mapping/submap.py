@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from gmmap import _core
-from gmmap.errors import InvalidInputError
+from gmmap.errors import FileFormatError, InvalidInputError
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import Horizon, HorizonRecorder, code_ranges, range_codes
 from gmmap.math.em import fit_gmm
@@ -120,7 +120,9 @@ def _load_horizons(d) -> tuple[list[Horizon] | None, tuple[float, float] | None]
     if "horizon_band" not in d:
         return None, None
     low, high = (float(v) for v in d["horizon_band"])
-    origins, codes = d["horizon_origins"], d["horizon_codes"]
+    origins, codes = d.get("horizon_origins"), d.get("horizon_codes")
+    if origins is None or codes is None or len(origins) != len(codes):
+        raise FileFormatError("submap file: horizons without their viewpoints or codes")
     return [Horizon(o, code_ranges(c)) for o, c in zip(origins, codes, strict=True)], (low, high)
 
 
