@@ -1,3 +1,4 @@
+import math
 import os
 import time
 from pathlib import Path
@@ -68,3 +69,12 @@ def assert_two_robots_joined(nodes, outs, folder: Path) -> None:
     for name in ("a", "b"):
         r = json.loads((folder / f"{name}.json").read_text())
         assert r["held"] == {"a": 2, "b": 2} and r["groups"] == [["a", "b"]]
+
+
+def yaw_pose(yaw_deg: float, t) -> np.ndarray:
+    """A 4x4 pose turned ``yaw_deg`` about +z and moved by ``t``."""
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:3, 3] = t
+    return T

@@ -3,12 +3,12 @@ verification to tell a place from its turned-round twin, on a 360° LiDAR and a 
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from conftest import yaw_pose
 from gmmap.config import Config
 from gmmap.eval.place import truth
 from gmmap.eval.registration import pose_errors
@@ -26,14 +26,6 @@ WALLS = np.array([
     [(6, 1), (6, 4)], [(6, -1), (6, -4)], [(6, 4), (10, 4)], [(6, -4), (10, -4)],
     [(10, -4), (10, 4)],
 ], dtype=float)  # fmt: skip
-
-
-def yaw_pose(yaw_deg: float, xyz) -> np.ndarray:
-    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-    T = np.eye(4)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:3, 3] = xyz
-    return T
 
 
 def scan(xy, heading_deg: float, fov_deg: float, rng) -> np.ndarray:

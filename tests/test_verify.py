@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from conftest import yaw_pose
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import evaluate_registration, pose_errors
@@ -38,14 +38,6 @@ def corridor(rng) -> np.ndarray:
     ])  # fmt: skip
 
 
-def pose(yaw_deg: float, t) -> np.ndarray:
-    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-    T = np.eye(4)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:3, 3] = t
-    return T
-
-
 def fit(points: np.ndarray) -> Gmm:
     return fit_gmm(points, 100, covariance="full", seed=0)
 
@@ -71,7 +63,7 @@ def test_a_partial_overlap_is_verified_and_a_flipped_corridor_is_not() -> None:
     # test refuse it.
     rng = np.random.default_rng(0)
     hall = corridor(rng)
-    flipped = hall @ pose(180, (6.0, 0.0, 0.0))[:3, :3].T + (6.0, 0.0, 0.0)
+    flipped = hall @ yaw_pose(180, (6.0, 0.0, 0.0))[:3, :3].T + (6.0, 0.0, 0.0)
     m = verify(fit(hall), fit(flipped), PlaceOptions(sure_confidence=None))
     assert not m.accepted, (m.registration.confidence, m.registration.alternative_confidence)
     held = [submap("a", 0, np.eye(4), hall), submap("b", 0, np.eye(4), flipped)]
@@ -116,7 +108,7 @@ def test_a_query_that_fits_two_places_of_one_map_is_rejected() -> None:
         reg = Registration(np.eye(4), confidence, np.eye(6), 1, 0.0)
         return Match(("a", 0), Candidate("b", seq, 0.0), reg, True)
 
-    anchors = {("b", 0): np.eye(4), ("b", 1): pose(0, (5.0, 0, 0)), ("b", 2): np.eye(4)}
+    anchors = {("b", 0): np.eye(4), ("b", 1): yaw_pose(0, (5.0, 0, 0)), ("b", 2): np.eye(4)}
     judged = distinct([match(0, 0.8), match(1, 0.75), match(2, 0.7)], anchors, PlaceOptions())
     assert [m.accepted for m in judged] == [False, False, False]
     assert judged[0].conflict == pytest.approx(0.75 / 0.8)
@@ -161,13 +153,13 @@ def test_a_match_as_good_as_the_robots_own_lookalikes_is_refused() -> None:
     rng = np.random.default_rng(1)
     office, other = room(rng), hall(rng)
     away = (30.0, 0.0, 0.0), (60.0, 0.0, 0.0)
-    b_frame = pose(70, (3.0, -2.0, 0.0))  # where b's map frame sits in a's
+    b_frame = yaw_pose(70, (3.0, -2.0, 0.0))  # where b's map frame sits in a's
     held = [
         submap("a", 0, np.eye(4), office),
-        submap("a", 1, pose(0, away[0]), office + away[0]),
-        submap("a", 2, pose(0, away[1]), other + away[1]),
+        submap("a", 1, yaw_pose(0, away[0]), office + away[0]),
+        submap("a", 2, yaw_pose(0, away[1]), other + away[1]),
         submap("b", 0, np.linalg.inv(b_frame), room(rng)),
-        submap("b", 1, np.linalg.inv(b_frame) @ pose(0, away[1]), hall(rng) + away[1]),
+        submap("b", 1, np.linalg.inv(b_frame) @ yaw_pose(0, away[1]), hall(rng) + away[1]),
     ]
     # Only this test decides here: no within-pair ambiguity test, no local-map refinement.
     options = PlaceOptions(max_distance=2.0, max_ambiguity=1.0, skip_recent=0, refine_neighbours=0)
@@ -189,7 +181,7 @@ def test_a_match_free_to_slide_along_a_bare_corridor_is_refused() -> None:
     refused (`PlaceOptions.min_conditioning`); with that test off it is accepted. The same
     stretch with a cabinet and a closed end (`room`) is pinned and kept."""
     rng = np.random.default_rng(2)
-    b_frame = pose(40, (2.0, 1.0, 0.0))
+    b_frame = yaw_pose(40, (2.0, 1.0, 0.0))
     # Only this test decides here: the corridor is the same from either end.
     options = PlaceOptions(max_distance=2.0, max_ambiguity=1.0, skip_recent=0, max_turned=None)
     for scene, kept in ((corridor, False), (room, True)):
