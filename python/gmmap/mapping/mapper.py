@@ -157,9 +157,12 @@ class Mapper:
         the best one left leads and the next one left is the alternative. Where alike places
         score higher than the right alignment, the wrong ones fill what was seen free."""
         limit = self.config.place.max_seen_through
-        if limit is None or not reg.basins or self._seen_through(query, key, reg.transform) is None:
+        if limit is None or not reg.basins:
             return reg
-        free = [b for b in reg.basins if self._seen_through(query, key, b[0]) <= limit]
+        shares = [self._seen_through(query, key, T) for T, _ in reg.basins]
+        if shares[0] is None:  # either robot's free space unknown
+            return reg
+        free = [b for b, share in zip(reg.basins, shares, strict=True) if share <= limit]
         if not free:
             return reg
         alternative = free[1][1] if len(free) > 1 else 0.0
