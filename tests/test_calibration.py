@@ -7,8 +7,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_verify import hall, pose, submap
+from test_verify import hall, submap
 
+from conftest import yaw_pose
 from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.eval.calibration import check, fit
@@ -68,7 +69,7 @@ def test_a_match_unlike_anything_fitted_on_is_refused(tmp_path):
     path = tmp_path / "calibration.json"
     fit([(X[keep], y[keep])], "corridors only").save(path)
     rng = np.random.default_rng(3)
-    b_frame = pose(30, (1.0, 2.0, 0.0))
+    b_frame = yaw_pose(30, (1.0, 2.0, 0.0))
     held = [
         submap("a", 0, np.eye(4), hall(rng)),
         submap("b", 0, np.linalg.inv(b_frame), hall(rng)),
