@@ -96,6 +96,11 @@ def test_a_corridor_is_told_from_its_turned_twin_by_the_free_space_seen(fov, a, 
     refused = mapper._unseen(query, as_twin)
     assert not refused.accepted and refused.seen_through > options.max_seen_through
     assert mapper._unseen(query, match).seen_through <= options.max_seen_through
+    # As a lookalike of its own robot's, the twin is no rival the verification could take.
+    c = match.registration.confidence
+    twin_only = replace(as_twin.registration, basins=((twin, c),))
+    assert mapper._plausible(query, key, twin_only) == 0.0
+    assert mapper._plausible(query, key, replace(twin_only, basins=((right, c),))) == c
     # Without horizons nothing says where the robots' rays went: the twin passes this test.
     blind = Mapper(Config(place=options))
     blind.hold([replace(s, horizons=None, horizon_band=None) for s in held])

@@ -13,12 +13,13 @@ from gmmap.errors import InvalidInputError
 from gmmap.eval.registration import evaluate_registration, pose_errors
 from gmmap.io.datasets import BUNDLED_TUM_SLICE
 from gmmap.io.datasets.tum import TumRgbd
+from gmmap.mapping.confusion import Confusion
 from gmmap.mapping.mapper import Mapper
 from gmmap.mapping.place import Candidate, Match, PlaceDatabase, distinct
 from gmmap.mapping.submap import Submap, build_submaps
 from gmmap.math.em import fit_gmm
 from gmmap.math.gmm import Gmm
-from gmmap.math.register import Registration
+from gmmap.math.register import Registration, register
 from gmmap.options import BuildOptions, PlaceOptions
 
 
@@ -167,9 +168,9 @@ def test_a_match_as_good_as_the_robots_own_lookalikes_is_refused() -> None:
     matches = {(m.query, (m.candidate.robot, m.candidate.seq)): m for m in mapper.add(held)}
     lookalike = matches[(("a", 0), ("b", 0))]
     assert lookalike.registration.confidence > 0.8
-    assert not lookalike.accepted and lookalike.confusion >= options.max_confusion
+    assert not lookalike.accepted and lookalike.plausible_confusion >= options.max_confusion
     unique = matches[(("a", 2), ("b", 1))]
-    assert unique.accepted and unique.confusion < options.max_confusion
+    assert unique.accepted and unique.plausible_confusion < options.max_confusion
     truth = np.linalg.inv(held[4].anchor) @ held[2].anchor
     t, r = pose_errors(unique.registration.transform, truth)
     assert t < 0.05 and r < 1.0, (t, r)
@@ -195,3 +196,29 @@ def test_a_match_free_to_slide_along_a_bare_corridor_is_refused() -> None:
         assert match.accepted == kept
         (free,) = Mapper(Config(place=replace(options, min_conditioning=0.0))).add(held)
         assert free.accepted
+
+
+@pytest.mark.parametrize(
+    ("plausible", "level", "accepted"),
+    [(0.5, 0.95, True), (0.9, 0.95, False), (0.5, 1.1, False), (0.0, 0.0, True)],
+)
+def test_a_match_must_clear_plausible_lookalikes_by_a_margin_and_beat_all(
+    plausible, level, accepted
+) -> None:
+    """Lookalikes that fill free space their robot saw only need beating (max_any_confusion,
+    1); those that do not, by the margin max_confusion (0.85)."""
+    rng = np.random.default_rng(3)
+    held = [submap("a", 0, np.eye(4), room(rng)), submap("b", 0, np.eye(4), room(rng))]
+    mapper = Mapper(Config())
+    mapper.hold(held)
+    reg = register(held[0].gmm, held[1].gmm, np.eye(4))
+    m = Match(("a", 0), Candidate("b", 0, 0.0), reg, accepted=True)
+    c = reg.confidence
+    mapper._confusions = {
+        ("a", 0): Confusion(level * c, plausible * c),
+        ("b", 0): Confusion(),
+    }
+    judged = mapper._unconfused(m)
+    assert judged.accepted == accepted
+    assert judged.plausible_confusion == pytest.approx(plausible)
+    assert judged.confusion == pytest.approx(level)

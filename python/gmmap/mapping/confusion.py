@@ -9,6 +9,11 @@ to be different, so the best C a submap reaches against those, with no initial g
 a wrong match of it reaches. `confusion` is that level; `gmmap.mapping.mapper.Mapper` refuses a
 match whose C is not clearly above it on either side (`PlaceOptions.max_confusion`).
 
+A lookalike is a wrong match the verification would still take only where it fills no free space
+either submap's robot saw: where submaps carry horizons, `confusion` also gives the level over
+the lookalikes left once those that do are set aside (`Confusion.plausible`). The Mapper holds a
+match to the strict margin against those and to plain superiority over all.
+
 Where a robot never left its place (a desk recording) no own submap lies apart, the confusion is
 0 and nothing changes. A robot that closed a loop has apart-by-odometry submaps that overlap;
 they raise its confusion, which makes the test stricter, never looser.
@@ -16,13 +21,14 @@ they raise its confusion, which makes the test stricter, never looser.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
 from gmmap.mapping.place import PlaceDatabase
 from gmmap.mapping.submap import Submap
-from gmmap.math.register import confidence
+from gmmap.math.register import Registration, confidence
 
 Node = tuple[str, int]
 
@@ -31,23 +37,42 @@ Node = tuple[str, int]
 APART = 0.1
 
 
-def confusion(key: Node, held: Mapping[Node, Submap], db: PlaceDatabase, probes: int) -> float:
+@dataclass(frozen=True)
+class Confusion:
+    """The best confidence a submap reaches against places its robot knows are elsewhere:
+    ``level`` over every lookalike, ``plausible`` over those that fill no seen free space."""
+
+    level: float = 0.0
+    plausible: float = 0.0
+
+
+def confusion(
+    key: Node,
+    held: Mapping[Node, Submap],
+    db: PlaceDatabase,
+    probes: int,
+    plausible: Callable[[Node, Registration], float] | None = None,
+) -> Confusion:
     """The best no-guess confidence of submap ``key`` against up to ``probes`` of its robot's
-    other held submaps that odometry puts apart, the most alike by descriptor first."""
+    other held submaps that odometry puts apart, the most alike by descriptor first.
+    ``plausible(other, registration)``: the confidence of that registration's best solution
+    the free space leaves possible (0 where none); None: every solution is."""
     query = held[key]
     own = [k for k in held if k[0] == key[0] and k != key]
     if probes < 1 or not own:
-        return 0.0
+        return Confusion()
     vector = db.vector(key)
     distance = [1.0 - float(db.vector(k) @ vector) for k in own]
-    best, tried = 0.0, 0
+    level, possible, tried = 0.0, 0.0, 0
     for i in np.argsort(distance, kind="stable"):
         other = held[own[i]]
         odometry = np.linalg.inv(other.anchor) @ query.anchor
         if confidence(query.gmm, other.gmm, odometry) >= APART:
             continue
-        best = max(best, db.register_pair(query.gmm, other.gmm).confidence)
+        reg = db.register_pair(query.gmm, other.gmm)
+        level = max(level, reg.confidence)
+        possible = max(possible, reg.confidence if plausible is None else plausible(own[i], reg))
         tried += 1
         if tried == probes:
             break
-    return best
+    return Confusion(level, possible)

@@ -30,7 +30,7 @@ from gmmap.config import Config
 from gmmap.errors import InvalidInputError
 from gmmap.mapping.backend import BackendResult, PoseGraph
 from gmmap.mapping.calibration import Calibration, features
-from gmmap.mapping.confusion import confusion
+from gmmap.mapping.confusion import Confusion, confusion
 from gmmap.mapping.frontier import Horizon, seen_through
 from gmmap.mapping.globalmap import GlobalMap, build_global_map
 from gmmap.mapping.place import (
@@ -77,7 +77,7 @@ class Mapper:
         self._judged: set[frozenset[Node]] = set()
         # (query, candidate) → its registration before refinement: deterministic, so reusable.
         self._registrations: dict[tuple[Node, Node], Registration] = {}
-        self._confusions: dict[Node, float] = {}
+        self._confusions: dict[Node, Confusion] = {}
         # Free space each submap's robot saw (its horizons, anchor frame), where given.
         self.horizons: dict[Node, list[Horizon]] = {}
         self._lock = threading.Lock()
@@ -151,23 +151,28 @@ class Mapper:
             target = self.submaps[key].gmm
         return self._free_basin(query, key, self.db.register_pair(query.gmm, target))
 
-    def _free_basin(self, query: Submap, key: Node, reg: Registration) -> Registration:
-        """``reg`` with the basins that put more than ``max_seen_through`` of either submap's
-        surfaces where the other's robot saw free space dropped (both with free space known):
-        the best one left leads and the next one left is the alternative. Where alike places
-        score higher than the right alignment, the wrong ones fill what was seen free."""
+    def _free_basins(self, query: Submap, key: Node, reg: Registration) -> tuple | None:
+        """``reg``'s basins that put at most ``max_seen_through`` of either submap's surfaces
+        where the other's robot saw free space, best first; None where that is unknown."""
         limit = self.config.place.max_seen_through
         if limit is None or not reg.basins:
-            return reg
+            return None
         shares = [self._seen_through(query, key, T) for T, _ in reg.basins]
         if shares[0] is None:  # either robot's free space unknown
-            return reg
-        free = [b for b, share in zip(reg.basins, shares, strict=True) if share <= limit]
+            return None
+        return tuple(b for b, share in zip(reg.basins, shares, strict=True) if share <= limit)
+
+    def _free_basin(self, query: Submap, key: Node, reg: Registration) -> Registration:
+        """``reg`` with the basins that fill either robot's seen free space dropped
+        (`_free_basins`): the best one left leads and the next one left is the alternative.
+        Where alike places score higher than the right alignment, the wrong ones fill what
+        was seen free."""
+        free = self._free_basins(query, key, reg)
         if not free:
             return reg
         alternative = free[1][1] if len(free) > 1 else 0.0
         if free[0][0] is reg.basins[0][0]:
-            return replace(reg, alternative_confidence=alternative, basins=tuple(free))
+            return replace(reg, alternative_confidence=alternative, basins=free)
         with self._lock:
             target = self.submaps[key].gmm
         # Its information and confidence where it ends, at the search's finest scale.
@@ -178,8 +183,16 @@ class Mapper:
             iterations=reg.iterations + r.iterations,
             time_s=reg.time_s + r.time_s,
             alternative_confidence=alternative,
-            basins=tuple(free),
+            basins=free,
         )
+
+    def _plausible(self, query: Submap, key: Node, reg: Registration) -> float:
+        """The confidence of ``reg``'s best basin that fills no seen free space (`_free_basins`;
+        every basin where unknown), 0 where none is left: a lookalike verification could take."""
+        free = self._free_basins(query, key, reg)
+        if free is None:
+            return reg.confidence
+        return free[0][1] if free else 0.0
 
     def _free_view(self, key: Node) -> tuple[list[Horizon], np.ndarray, tuple, float] | None:
         """The free space held submap ``key``'s robot saw: its horizons (anchor frame), the
@@ -224,12 +237,18 @@ class Mapper:
         return replace(m, accepted=share <= limit, seen_through=share)
 
     def _unconfused(self, m: Match) -> Match:
-        """``m`` refused unless its confidence is clearly above what either submap reaches
-        against places its own robot knows are elsewhere (`gmmap.mapping.confusion`)."""
+        """``m`` refused unless its confidence is clearly above (``max_confusion``) what either
+        submap reaches against places its own robot knows are elsewhere, as verification would
+        take them, and above (``max_any_confusion``) any alignment there at all
+        (`gmmap.mapping.confusion`)."""
         options = self.config.place
-        level = max(self._confusion(m.query), self._confusion((m.candidate.robot, m.candidate.seq)))
-        ratio = level / m.registration.confidence if m.registration.confidence > 0 else 0.0
-        return replace(m, accepted=ratio < options.max_confusion, confusion=ratio)
+        mine = self._confusion(m.query)
+        theirs = self._confusion((m.candidate.robot, m.candidate.seq))
+        c = m.registration.confidence
+        ratio = max(mine.plausible, theirs.plausible) / c if c > 0 else 0.0
+        level = max(mine.level, theirs.level) / c if c > 0 else 0.0
+        accepted = ratio < options.max_confusion and level < options.max_any_confusion
+        return replace(m, accepted=accepted, confusion=level, plausible_confusion=ratio)
 
     def _untwinned(self, query: Submap, m: Match) -> Match:
         """``m`` refused when its alignment turned half round scores within
@@ -242,13 +261,16 @@ class Mapper:
         ratio = turned(query.gmm, candidate, m.registration, self.config.register)
         return replace(m, accepted=ratio < limit, turned=ratio)
 
-    def _confusion(self, key: Node) -> float:
+    def _confusion(self, key: Node) -> Confusion:
         """The confusion of held submap ``key``, computed once, against what is held then."""
         if key not in self._confusions:
             with self._lock:
                 held = dict(self.submaps)
             probes = self.config.place.confusion_probes
-            self._confusions[key] = confusion(key, held, self.db, probes)
+            query = held[key]
+            self._confusions[key] = confusion(
+                key, held, self.db, probes, lambda other, reg: self._plausible(query, other, reg)
+            )
         return self._confusions[key]
 
     def rejudged(self, progress: Progress | None = None) -> Mapper:

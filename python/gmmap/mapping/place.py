@@ -160,8 +160,10 @@ class Match:
     registration: Registration
     accepted: bool
     conflict: float = 0.0
-    # The higher of the two submaps' `gmmap.mapping.confusion`, relative to this confidence.
+    # The higher of the two submaps' `gmmap.mapping.confusion`, relative to this confidence:
+    # over every lookalike, and over those that fill no seen free space.
     confusion: float = 0.0
+    plausible_confusion: float = 0.0
     # The confidence of this alignment turned half round (`turned`), relative to this one.
     turned: float = 0.0
     # The share of either submap's surfaces this alignment puts where the other's robot saw
