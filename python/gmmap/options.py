@@ -267,8 +267,8 @@ class PlaceOptions:
     # submaps that odometry puts apart (up to confusion_probes of them): its lookalikes that
     # fill no free space its robot saw must stay under max_confusion·C, all under
     # max_any_confusion·C.
-    max_confusion: float = 0.85  #: Refuse unless plausible lookalikes stay under this·C
-    max_any_confusion: float = 1.0  #: Refuse unless every lookalike stays under this·C
+    max_confusion: float = 0.85  #: Refuse a match unless plausible lookalikes stay under this·C
+    max_any_confusion: float = 1.0  #: Refuse a match unless every lookalike stays under this·C
     confusion_probes: int = 3  #: Own distant submaps confusion is measured against; 0: no test
     max_turned: float | None = 0.9  #: Refuse if the half-turned match scores this·C; null: off
     min_conditioning: float = 0.004  #: Refuse a match pinned this loosely in some direction; 0: off
