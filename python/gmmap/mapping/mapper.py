@@ -245,10 +245,10 @@ class Mapper:
         mine = self._confusion(m.query)
         theirs = self._confusion((m.candidate.robot, m.candidate.seq))
         c = m.registration.confidence
-        ratio = max(mine.plausible, theirs.plausible) / c if c > 0 else 0.0
-        level = max(mine.level, theirs.level) / c if c > 0 else 0.0
-        accepted = ratio < options.max_confusion and level < options.max_any_confusion
-        return replace(m, accepted=accepted, confusion=level, plausible_confusion=ratio)
+        plausible = max(mine.plausible, theirs.plausible) / c if c > 0 else 0.0
+        every = max(mine.level, theirs.level) / c if c > 0 else 0.0
+        accepted = plausible < options.max_confusion and every < options.max_any_confusion
+        return replace(m, accepted=accepted, confusion=every, plausible_confusion=plausible)
 
     def _untwinned(self, query: Submap, m: Match) -> Match:
         """``m`` refused when its alignment turned half round scores within
