@@ -449,6 +449,9 @@ class ExploreOptions:
 
     bins: int = 72  #: Directions per free-space horizon (72: every 5°, one byte each)
     horizon_spacing: float = 1.0  #: Metres of path between two horizons' viewpoints
+    #: A view that would lose or invent this share of free space seen from the current
+    #: viewpoint starts a horizon of its own (a doorway between them); null: never
+    max_distortion: float | None = 0.2
     link_radius: float = 2.5  #: Viewpoints this close join the route graph if known free between
     #: Frontier points (open ones first) a cluster needs to be a goal while a larger one is left
     min_frontier: int = 3

@@ -111,7 +111,10 @@ class Explorer:
         self.builder = SubmapBuilder(robot, build, self.config.select)
         self.mapper = Mapper(self.config) if share else None
         self.recorder = HorizonRecorder(
-            self.options.bins, self.options.horizon_spacing, self.planner_options.z_band
+            self.options.bins,
+            self.options.horizon_spacing,
+            self.planner_options.z_band,
+            max_distortion=self.options.max_distortion,
         )
         self.team: dict[Node, SharedSubmap] = {}
         self.claims: dict[str, Claim] = {}

@@ -79,16 +79,56 @@ def horizon_from(
     out = np.full(bins, np.nan)
     # Directions and ranges of the returns that say something only: a depth camera's frame is
     # 300,000 points, a few percent of them in the band.
-    for which, fill, reduce in ((low, 0.0, np.maximum), (hit, np.inf, np.minimum)):
-        if not which.any():
-            continue
-        d = np.asarray(points_xyz, dtype=np.float64)[which, :2] - origin
-        b = np.floor(np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins).astype(int) % bins
+    d = np.asarray(points_xyz, dtype=np.float64)[low | hit, :2] - origin
+    if not len(d):
+        return out
+    turns = np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins
+    b = np.floor(turns).astype(int) % bins
+    r = np.hypot(d[:, 0], d[:, 1])
+    which = hit[low | hit]
+    for mask, fill, reduce in ((~which, 0.0, np.maximum), (which, np.inf, np.minimum)):
         best = np.full(bins, fill)
-        reduce.at(best, b, np.hypot(d[:, 0], d[:, 1]))
+        reduce.at(best, b[mask], r[mask])
         seen = (best > 0) & np.isfinite(best)
         out[seen] = best[seen]
-    return out
+    # A direction the view only grazed (the edge of a camera's field of view) is not seen: a
+    # surface in the part it missed may lie nearer than what the rest saw.
+    return np.where(_spanned(turns - np.floor(turns), b, bins), out, np.nan)
+
+
+def _spanned(offset: np.ndarray, b: np.ndarray, bins: int, edge: float = 0.2) -> np.ndarray:
+    """Per direction, whether returns reach within ``edge`` of a bin's width of both its sides
+    (``offset``: each return's place across its bin ``b``, 0 to 1)."""
+    first, last = np.full(bins, np.inf), np.full(bins, -np.inf)
+    np.minimum.at(first, b, offset)
+    np.maximum.at(last, b, offset)
+    return (first <= edge) & (last >= 1 - edge)
+
+
+def samples(h: Horizon, fractions: tuple[float, ...] = (0.3, 0.6, 0.9)) -> np.ndarray:
+    """(N, 2) points inside ``h``: along each seen direction's middle, at ``fractions`` of its
+    free range."""
+    bins = np.flatnonzero(np.isfinite(h.ranges))
+    angle = (bins + 0.5) * 2 * math.pi / len(h.ranges)
+    r = (h.ranges[bins][:, None] * np.asarray(fractions)[None]).ravel()
+    angle = np.repeat(angle, len(fractions))
+    return h.origin + np.c_[np.cos(angle) * r, np.sin(angle) * r]
+
+
+def distortion(before: Horizon, view: Horizon, merged: Horizon) -> float:
+    """The share of free space lost or invented when ``view`` (a frame's horizon from its own
+    position) joins ``before`` as ``merged`` (the same frame seen from ``before``'s viewpoint):
+    the larger of the share of the view's samples outside ``merged`` and the share of
+    ``merged``'s samples outside both ``before`` and the view."""
+    lost = samples(view)
+    invented = samples(merged)
+    shares = []
+    if len(lost):
+        shares.append(float(np.mean(~FreeSpace([merged]).contains(lost, body=False))))
+    if len(invented):
+        known = FreeSpace([before, view]).contains(invented, body=False)
+        shares.append(float(np.mean(~known)))
+    return max(shares, default=0.0)
 
 
 def merge_ranges(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -188,9 +228,15 @@ class HorizonRecorder:
     given (an exploring robot's map frame, or a submap's anchor frame)."""
 
     def __init__(
-        self, bins: int, spacing: float, band: tuple[float, float], floor: float | None = 0.05
+        self,
+        bins: int,
+        spacing: float,
+        band: tuple[float, float],
+        floor: float | None = 0.05,
+        max_distortion: float | None = None,
     ) -> None:
         self.bins, self.spacing, self.band, self.floor = bins, spacing, band, floor
+        self.max_distortion = max_distortion
         self.closed: list[Horizon] = []
         self.current: Horizon | None = None
 
@@ -198,16 +244,29 @@ class HorizonRecorder:
         self.observe(frame.points, frame.pose)
 
     def observe(self, points: np.ndarray, pose: np.ndarray) -> None:
-        """Sensor-frame ``points`` seen from ``pose`` (into this recorder's frame)."""
+        """Sensor-frame ``points`` seen from ``pose`` (into this recorder's frame). A view
+        joins the current horizon as if seen from its viewpoint; with ``max_distortion``, one
+        that would then lose or invent more than that share of free space (a doorway, a jamb
+        between the two viewpoints) starts a horizon of its own instead."""
         pts = np.asarray(points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
         origin = pose[:2, 3].copy()
         if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
-            self.closed.append(self.current)
-            self.current = None
+            self._close()
         if self.current is None:
             self.current = Horizon(origin, np.full(self.bins, np.nan))
         seen = horizon_from(pts, self.current.origin, self.band, self.bins, self.floor)
-        self.current.ranges = merge_ranges(self.current.ranges, seen)
+        merged = Horizon(self.current.origin, merge_ranges(self.current.ranges, seen))
+        if self.max_distortion is not None and np.linalg.norm(origin - merged.origin) > 0:
+            own = Horizon(origin, horizon_from(pts, origin, self.band, self.bins, self.floor))
+            if distortion(self.current, own, merged) > self.max_distortion:
+                self._close()
+                merged = own
+        self.current = merged
+
+    def _close(self) -> None:
+        if self.current is not None:
+            self.closed.append(self.current)
+        self.current = None
 
     def all(self) -> list[Horizon]:
         return self.closed + ([self.current] if self.current is not None else [])
