@@ -162,6 +162,9 @@ def test_explore_options_are_checked():
         ExploreOptions(bins=4)
     with pytest.raises(InvalidInputError):
         ExploreOptions(time_budget=0)
+    for bad in (-0.1, 1.5, math.nan):
+        with pytest.raises(InvalidInputError, match="max_distortion"):
+            ExploreOptions(max_distortion=bad)
 
 
 # ---- coverage is measured against the true world --------------------------------------------

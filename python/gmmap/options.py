@@ -445,12 +445,13 @@ class ExploreOptions:
     """Exploration (`gmmap.mapping.explore`): free-space horizons added to each shared submap,
     frontiers, the route graph between viewpoints, and how robots share goals. The simulator's
     robots, world and sensor are the ``sim`` section's; the run ends when no robot has a
-    frontier left or after ``time_budget`` s of simulated time."""
+    frontier left or after ``time_budget`` s of simulated time. A frame binned from the
+    current horizon's viewpoint that would lose or invent over ``max_distortion`` of its own
+    view's free space (a door between the two) starts a horizon of its own."""
 
     bins: int = 72  #: Directions per free-space horizon (72: every 5°, one byte each)
     horizon_spacing: float = 1.0  #: Metres of path between two horizons' viewpoints
-    #: A view that would lose or invent this share of free space seen from the current
-    #: viewpoint starts a horizon of its own (a doorway between them); null: never
+    #: Share of free space a view may lose or invent binned from the viewpoint; null: any
     max_distortion: float | None = 0.2
     link_radius: float = 2.5  #: Viewpoints this close join the route graph if known free between
     #: Frontier points (open ones first) a cluster needs to be a goal while a larger one is left
@@ -469,3 +470,7 @@ class ExploreOptions:
             raise InvalidInputError("explore.replan_s, turn_rate and time_budget must be > 0")
         if self.min_frontier < 1:
             raise InvalidInputError("explore.min_frontier must be >= 1")
+        if self.max_distortion is not None and not 0 <= self.max_distortion <= 1:
+            raise InvalidInputError(
+                f"explore.max_distortion must be in [0, 1] or null, got {self.max_distortion}"
+            )

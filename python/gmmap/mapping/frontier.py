@@ -105,7 +105,7 @@ def _spanned(offset: np.ndarray, b: np.ndarray, bins: int, edge: float = 0.2) ->
     return (first <= edge) & (last >= 1 - edge)
 
 
-def samples(h: Horizon, fractions: tuple[float, ...] = (0.3, 0.6, 0.9)) -> np.ndarray:
+def _samples(h: Horizon, fractions: tuple[float, ...] = (0.3, 0.6, 0.9)) -> np.ndarray:
     """(N, 2) points inside ``h``: along each seen direction's middle, at ``fractions`` of its
     free range."""
     bins = np.flatnonzero(np.isfinite(h.ranges))
@@ -120,8 +120,8 @@ def distortion(before: Horizon, view: Horizon, merged: Horizon) -> float:
     position) joins ``before`` as ``merged`` (the same frame seen from ``before``'s viewpoint):
     the larger of the share of the view's samples outside ``merged`` and the share of
     ``merged``'s samples outside both ``before`` and the view."""
-    lost = samples(view)
-    invented = samples(merged)
+    lost = _samples(view)
+    invented = _samples(merged)
     shares = []
     if len(lost):
         shares.append(float(np.mean(~FreeSpace([merged]).contains(lost, body=False))))
