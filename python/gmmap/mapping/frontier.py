@@ -79,13 +79,14 @@ def horizon_from(
     out = np.full(bins, np.nan)
     # Directions and ranges of the returns that say something only: a depth camera's frame is
     # 300,000 points, a few percent of them in the band.
-    d = np.asarray(points_xyz, dtype=np.float64)[low | hit, :2] - origin
+    says = low | hit
+    d = np.asarray(points_xyz, dtype=np.float64)[says, :2] - origin
     if not len(d):
         return out
     turns = np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) * bins
     b = np.floor(turns).astype(int) % bins
     r = np.hypot(d[:, 0], d[:, 1])
-    which = hit[low | hit]
+    which = hit[says]
     for mask, fill, reduce in ((~which, 0.0, np.maximum), (which, np.inf, np.minimum)):
         best = np.full(bins, fill)
         reduce.at(best, b[mask], r[mask])
