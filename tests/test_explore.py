@@ -293,13 +293,6 @@ def assert_in_different_rooms(r) -> None:
     assert r.coverage > 0.9
 
 
-SWAP = pytest.mark.xfail(
-    reason="known flaw (docs/guide/explore.md): each robot sees its room from the door and "
-    "leaves for the other before their maps join; the last frontiers left lie in one room",
-)
-
-
-@SWAP
 def test_two_robots_in_two_rooms_end_in_different_rooms(tmp_path):
     assert_in_different_rooms(run_explore(config(saved(two_rooms(), tmp_path), 2)))
 

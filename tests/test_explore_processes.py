@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_explore import SWAP, assert_in_different_rooms, config, saved, two_rooms
+from test_explore import assert_in_different_rooms, config, saved, two_rooms
 
 from gmmap.errors import DecodeError
 from gmmap.eval.explore.processes import ProcessTeam, run_processes
@@ -39,7 +39,6 @@ def test_claims_ticks_and_steps_round_trip_and_garbage_is_a_typed_error():
             decode_tick(bad)
 
 
-@SWAP
 def test_robots_as_processes_explore_two_rooms_and_end_in_different_rooms(tmp_path):
     r = run_processes(config(saved(two_rooms(), tmp_path), 2))
     assert_in_different_rooms(r)

@@ -6,8 +6,8 @@ submaps in its own map frame by the frames its `Mapper` finds between robots, so
 robots have joined their maps each explores alone, and after, they share one frontier set.
 
 Choosing a goal: the frontiers of the union of every known horizon, minus those behind a
-surface (the GMM occupancy field), those a joined peer heads for (its goal within
-``claim_radius``, unless this robot heads there already and is nearer) and those given up. A
+surface (the GMM occupancy field), those a joined peer heads for from nearer than this robot
+(its goal within ``claim_radius``; a robot left none waits) and those given up. A
 route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
 between them) and viewpoints within ``link_radius`` whose straight line is known free; a
 frontier's cost is the route to the cheapest viewpoint whose horizon holds its target plus
@@ -88,6 +88,12 @@ def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
     return direction, after if moved else None
 
 
+def moving_on(status: str) -> bool:
+    """Whether a robot with ``status`` still has somewhere to go: it explores, or waits while
+    its peers take the last frontiers (one may give up on its goal)."""
+    return status == "exploring" or status.startswith("waiting")
+
+
 @dataclass
 class Knowledge:
     """The team's map in the robot's frame: horizons, the occupancy field, the route graph."""
@@ -128,6 +134,7 @@ class Explorer:
         self._recent_anchor = np.eye(4)
         self._knowledge: Knowledge | None = None
         self._dirty = True
+        self._share_now = False  # close the submap at the next frame: the peers need its view
 
     # ---- input ------------------------------------------------------------------------------
 
@@ -136,6 +143,9 @@ class Explorer:
         self.recorder.add(frame)
         self.position = frame.pose[:2, 3].copy()
         submap = self.builder.add(frame)
+        if submap is None and self._share_now:
+            submap = self.builder.flush()
+        self._share_now = False
         if submap is None:
             return None
         shared = SharedSubmap(submap, self.recorder.take(submap.anchor))
@@ -163,7 +173,11 @@ class Explorer:
             self._hold(shared)
 
     def receive_claim(self, robot: str, claim: Claim) -> None:
+        """A peer's claim; where it takes this robot's goal, the next step chooses again (two
+        robots that chose at once do not both travel for the rest of ``replan_s``)."""
         self.claims[robot] = claim
+        if self.route is not None and self._taken(self.route.goal, self._joined_peers()):
+            self.route.chosen_at = -math.inf
 
     def claim(self) -> Claim:
         return Claim(self.position.copy(), None if self.route is None else self.route.goal.copy())
@@ -324,19 +338,14 @@ class Explorer:
             or fronts
         )
         if not fronts:
-            self.route, self.status = None, "done: no frontier left that it can reach"
+            self._stop("done: no frontier left that it can reach")
             return
         peers = self._joined_peers()
-        claimed = [g for _, g in peers if g is not None]
-        mine = None if self.route is None else self.route.goal
-        keep_mine = mine is not None and self._nearest(mine, peers)
-        free = [
-            f
-            for f in fronts
-            if all(np.linalg.norm(f.goal - g) > o.claim_radius for g in claimed)
-            or (keep_mine and np.linalg.norm(f.goal - mine) < 1.0)
-        ]
-        fronts = free or fronts
+        fronts = [f for f in fronts if not self._taken(f.goal, peers)]
+        if not fronts:
+            # Going too would only arrive after the peer and find nothing left to see.
+            self._stop("waiting: the frontiers left are nearer peers' goals")
+            return
         dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.
@@ -370,6 +379,12 @@ class Explorer:
         waypoints = np.array([*reversed(chain), f.goal])
         self.route = Route(waypoints, f.goal, stamp)
         self.status = "exploring"
+
+    def _stop(self, status: str) -> None:
+        """No goal left: what the robot saw on its way goes to its peers at once, so that
+        none sets out for a frontier this robot has already seen past."""
+        self._share_now |= self.route is not None
+        self.route, self.status = None, status
 
     def _still_open(self, fronts: list, costs: list[float]) -> int | None:
         """The frontier the current route heads for, if it is still one."""
@@ -419,12 +434,18 @@ class Explorer:
                 out.append((R @ claim.position + t, goal))
         return out
 
-    def _nearest(self, goal: np.ndarray, peers: list) -> bool:
-        """Whether no joined peer is nearer ``goal`` than this robot: then a goal it already
-        heads for stays its own, whoever claimed it since (two robots do not swap back and
-        forth)."""
+    def _taken(self, goal: np.ndarray, peers: list) -> bool:
+        """Whether a joined peer heads for ``goal`` (its goal within ``claim_radius``) from
+        nearer than this robot is: then it is the peer's. A robot that is nearer keeps it or
+        takes it over, and the peer yields at its next choice (robots do not swap back and
+        forth). A claim's position is the peer's when it chose: it is nearer since."""
         mine = float(np.linalg.norm(goal - self.position))
-        return all(np.linalg.norm(goal - position) >= mine for position, _ in peers)
+        return any(
+            g is not None
+            and np.linalg.norm(goal - g) <= self.options.claim_radius
+            and np.linalg.norm(g - p) < mine
+            for p, g in peers
+        )
 
     def _crowding(self, goal: np.ndarray, peers: list) -> float:
         """A cost for goals nearer a joined peer than this robot: robots spread out."""

@@ -345,13 +345,18 @@ class FreeSpace:
         belong to one cluster. A point is *open* when the space ``BEHIND`` m past it, away from
         its target, is neither known free nor blocked: unknown space lies there, not a sliver
         between two horizons against a mapped wall."""
-        probes, targets, owner = self._probes(spacing, back)
+        probes, targets, owner, ends = self._probes(spacing, back)
         if not len(probes):
             return []
         # Cheapest test first: most probes lie inside some other horizon.
         keep = ~self.contains(probes, shrink=-0.05)
-        probes, targets, owner = probes[keep], targets[keep], owner[keep]
+        probes, targets, owner, ends = probes[keep], targets[keep], owner[keep], ends[keep]
         keep = ~blocked(probes)
+        # A direction that ended on a surface has nothing unseen past it, however thin the
+        # field has grown a probe's width behind a far wall.
+        at_end = np.flatnonzero(keep & ~np.isnan(ends[:, 0]))
+        if len(at_end):
+            keep[at_end] = ~blocked(ends[at_end])
         probes, targets, owner = probes[keep], targets[keep], owner[keep]
         if not len(probes):
             return []
@@ -394,11 +399,12 @@ class FreeSpace:
             is_open[idx[free]] = False
         return is_open
 
-    def _probes(self, spacing: float, back: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Candidate frontier points with their targets and horizons: past the end of every
-        seen direction, and along every occlusion edge (a direction beside a farther seen one,
-        or beside one not seen at all) on the nearer side, each target mirrored into the
-        farther direction at the same range."""
+    def _probes(self, spacing: float, back: float) -> tuple[np.ndarray, ...]:
+        """Candidate frontier points with their targets, horizons and ends: past the end of
+        every seen direction (its end: where its range ends, past which a surface there lies),
+        and along every occlusion edge (a direction beside a farther seen one, or beside one
+        not seen at all) on the nearer side, each target mirrored into the farther direction
+        at the same range (no end: NaN)."""
         width = 2 * math.pi / self.bins
         r = self.ranges
         seen = ~np.isnan(r)
@@ -410,6 +416,7 @@ class FreeSpace:
         probes = [self.origins[h] + (r[h, b] + 0.3)[:, None] * u]
         targets = [self.origins[h] + np.maximum(r[h, b] - back, 0.0)[:, None] * u]
         owner = [h]
+        ends = [self.origins[h] + (r[h, b] + RANGE_STEP)[:, None] * u]
         near = np.nan_to_num(r, nan=0.0)
         for shift in (-1, 1):
             far = np.roll(r, -shift, axis=1)  # the neighbour's range
@@ -428,7 +435,8 @@ class FreeSpace:
             probes.append(self.origins[hh] + dist[:, None] * side(bb - shift * 0.3 * width))
             targets.append(self.origins[hh] + dist[:, None] * side(bb + shift * 0.3 * width))
             owner.append(hh)
-        return np.vstack(probes), np.vstack(targets), np.concatenate(owner)
+            ends.append(np.full((len(hh), 2), np.nan))
+        return np.vstack(probes), np.vstack(targets), np.concatenate(owner), np.vstack(ends)
 
 
 def unit(v: np.ndarray) -> np.ndarray:

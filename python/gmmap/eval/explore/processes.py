@@ -33,6 +33,7 @@ from gmmap.fleet.net.transport import Transport, TransportConfig
 from gmmap.fleet.node.explorer import SIM, TICK_TIMEOUT_S
 from gmmap.fleet.wire.codec import decode
 from gmmap.fleet.wire.explore import DATA, Step, Tick, decode_step, encode_json
+from gmmap.mapping.explore import moving_on
 from gmmap.mapping.frontier import Horizon, decode_horizons
 
 START_TIMEOUT_S = 120.0  # for every robot process to start and say it is ready
@@ -120,7 +121,7 @@ class ProcessTeam(Team):
     def _decide(self, i: int, t: float) -> tuple[np.ndarray | None, bool]:
         step = self.answers[i]
         direction = None if step.direction is None else np.array(step.direction)
-        return direction, step.status == "exploring"
+        return direction, moving_on(step.status)
 
     def _horizons(self) -> list[Horizon]:
         return self.placed

@@ -24,7 +24,7 @@ from gmmap.eval.explore.coverage import Coverage
 from gmmap.fleet.wire.codec import encode
 from gmmap.io.sim import DepthCamera, Lidar, World, floor_pose, load_world, sensed, sim_sensor
 from gmmap.io.sim.run import EPOCH
-from gmmap.mapping.explore import Explorer, SharedSubmap, next_move
+from gmmap.mapping.explore import Explorer, SharedSubmap, moving_on, next_move
 from gmmap.mapping.frontier import FreeSpace, Horizon
 
 MODES = ("shared", "no-sharing", "dense")
@@ -215,7 +215,7 @@ class Team:
             for j, other in enumerate(self.agents):
                 if j != i:
                     other.receive_claim(self.names[i], claim)
-        return direction, agent.status == "exploring"
+        return direction, moving_on(agent.status)
 
     def _horizons(self) -> list[Horizon]:
         """The team's horizons in the world frame (the area it knows is free)."""
