@@ -75,9 +75,10 @@ class Claim:
 
 
 def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
-    """``agent.next_direction(stamp)`` (an `Explorer`, or anything with its ``claim`` and
-    ``next_direction``) and the claim to tell its peers: its new one where its goal moved by
-    more than 5 cm or came or went, else None."""
+    """``agent.next_direction(stamp)`` (an `Explorer`, or anything with its ``claim``,
+    ``route`` and ``next_direction``) and the claim to tell its peers: its new one where its
+    goal moved by more than 5 cm or came or went, or where it chose again and kept its goal
+    (its peers weigh how near it is), else None."""
     before = agent.claim().goal
     direction = agent.next_direction(stamp)
     after = agent.claim()
@@ -85,7 +86,8 @@ def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
         moved = (before is None) != (after.goal is None)
     else:
         moved = bool(np.linalg.norm(before - after.goal) > 0.05)
-    return direction, after if moved else None
+    chose = agent.route is not None and agent.route.chosen_at == stamp
+    return direction, after if moved or chose else None
 
 
 def moving_on(status: str) -> bool:
@@ -178,6 +180,8 @@ class Explorer:
         self.claims[robot] = claim
         if self.route is not None and self._taken(self.route.goal, self._joined_peers()):
             self.route.chosen_at = -math.inf
+        elif claim.goal is None and self.status.startswith("waiting"):
+            self._chosen_at = -math.inf  # the peer's goal is gone: it may have left one
 
     def claim(self) -> Claim:
         return Claim(self.position.copy(), None if self.route is None else self.route.goal.copy())
@@ -367,7 +371,7 @@ class Explorer:
             self.route = None
             self.status = f"stopped: {len(fronts)} frontiers, none reachable on known free space"
             return
-        current = self._still_open(fronts, costs)
+        current = self._still_open(fronts, costs, peers)
         if current is not None and costs[current] <= costs[best] + SWITCH_COST:
             self.route.chosen_at = stamp  # keep going: switching goals back and forth wastes more
             return
@@ -383,12 +387,12 @@ class Explorer:
     def _stop(self, status: str) -> None:
         """No goal left: what the robot saw on its way goes to its peers at once, so that
         none sets out for a frontier this robot has already seen past."""
-        self._share_now |= self.route is not None
+        self._share_now |= self.status == "exploring"
         self.route, self.status = None, status
 
-    def _still_open(self, fronts: list, costs: list[float]) -> int | None:
-        """The frontier the current route heads for, if it is still one."""
-        if self.route is None:
+    def _still_open(self, fronts: list, costs: list[float], peers: list) -> int | None:
+        """The frontier the current route heads for, if it is still one and not a peer's."""
+        if self.route is None or self._taken(self.route.goal, peers):
             return None
         gaps = [float(np.linalg.norm(f.goal - self.route.goal)) for f in fronts]
         i = int(np.argmin(gaps))
