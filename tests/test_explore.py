@@ -133,6 +133,24 @@ def test_a_view_from_elsewhere_does_not_free_a_jamb_beside_the_viewpoint():
         assert FreeSpace(recorder.all()).contains([[0.3, 0.0]], body=False)[0] == freed
 
 
+def test_a_view_through_a_door_does_not_free_the_wall_beside_it():
+    """Traced: a depth robot on random-office:101 drove into a door jamb. A horizon's viewpoint
+    is 0.5 m north of a wall (y 4.69-4.79, a door at x < 1.86) and has seen north only; the
+    next view, 0.84 m away through the door, sees a room far to the south-east. The lines from
+    the viewpoint to that room cross the wall just past the jamb: a thin stretch, next to the
+    room's area, that nobody saw. It must stay unknown."""
+    room = np.c_[np.linspace(1.0, 8.0, 700), np.full(700, 1.5), np.full(700, 0.5)]
+    pose = np.eye(4)
+    pose[:2, 3] = [1.66, 4.47]
+    through = Frame(0.0, np.asarray(room - pose[:3, 3], dtype=np.float32), pose)
+    for distortion, freed in ((None, True), (ExploreOptions().max_distortion, False)):
+        recorder = HorizonRecorder(72, 1.0, (0.05, 1.2), max_distortion=distortion)
+        recorder.add(_frame([1.67, 5.31], [[1.67, 8.0, 0.5]]))
+        recorder.add(through)
+        inside_wall = FreeSpace(recorder.all()).contains([[2.0, 4.74], [2.1, 4.72]], body=False)
+        assert inside_wall.any() == freed
+
+
 def test_free_space_is_inside_some_horizon_and_frontiers_lie_beside_it():
     ranges = np.full(72, np.nan)
     ranges[:18] = 4.0  # a quarter of the view, 4 m deep, nothing blocks it

@@ -447,7 +447,8 @@ class ExploreOptions:
     robots, world and sensor are the ``sim`` section's; the run ends when no robot has a
     frontier left or after ``time_budget`` s of simulated time. A frame binned from the
     current horizon's viewpoint that would lose or invent over ``max_distortion`` of its own
-    view's free space (a door between the two) starts a horizon of its own."""
+    view's free space (a door between the two), or invent over 0.3 m along one direction (a
+    wall between the two), starts a horizon of its own."""
 
     bins: int = 72  #: Directions per free-space horizon (72: every 5°, one byte each)
     horizon_spacing: float = 1.0  #: Metres of path between two horizons' viewpoints

@@ -40,6 +40,7 @@ BODY = 0.4  # metres about a viewpoint known free whatever was seen: the robot s
 MAX_CODE = 255
 BACK = 0.4  # metres a frontier's target lies inside the horizon that sees it
 SEEN_MARGIN = 0.2  # metres inside a horizon a surface must lie to contradict it
+MAX_INVENTED = 0.3  # metres along one direction a view joining a horizon may invent
 BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
@@ -130,6 +131,26 @@ def distortion(before: Horizon, view: Horizon, merged: Horizon) -> float:
         known = FreeSpace([before, view]).contains(invented, body=False)
         shares.append(float(np.mean(~known)))
     return max(shares, default=0.0)
+
+
+def invented_run(before: Horizon, view: Horizon, merged: Horizon, step: float = 0.1) -> float:
+    """The longest stretch (m) of one of ``merged``'s directions (its middle) that neither
+    ``before`` nor ``view`` saw free: a wall between the view's position and the viewpoint,
+    which a share of samples hardly weighs, being thin (`distortion`)."""
+    bins = np.flatnonzero(np.isfinite(merged.ranges))
+    if not len(bins):
+        return 0.0
+    steps = np.arange(step, np.nanmax(merged.ranges[bins]) + step / 2, step)
+    angle = (bins + 0.5) * 2 * math.pi / len(merged.ranges)
+    u = np.c_[np.cos(angle), np.sin(angle)]
+    pts = merged.origin + u[:, None, :] * steps[None, :, None]
+    inside = steps[None, :] < merged.ranges[bins][:, None]
+    known = FreeSpace([before, view]).contains(pts.reshape(-1, 2)).reshape(inside.shape)
+    run = best = np.zeros(len(bins))
+    for column in (inside & ~known).T:  # longest run of unknown samples per direction
+        run = np.where(column, run + step, 0.0)
+        best = np.maximum(best, run)
+    return float(best.max())
 
 
 def merge_ranges(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -247,8 +268,9 @@ class HorizonRecorder:
     def observe(self, points: np.ndarray, pose: np.ndarray) -> None:
         """Sensor-frame ``points`` seen from ``pose`` (into this recorder's frame). A view
         joins the current horizon as if seen from its viewpoint; with ``max_distortion``, one
-        that would then lose or invent more than that share of free space (a doorway, a jamb
-        between the two viewpoints) starts a horizon of its own instead."""
+        that would then lose or invent more than that share of free space (a doorway between
+        the two viewpoints), or invent over `MAX_INVENTED` along one direction (a wall between
+        them), starts a horizon of its own instead."""
         pts = np.asarray(points, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
         origin = pose[:2, 3].copy()
         if self.current is not None and np.linalg.norm(origin - self.current.origin) > self.spacing:
@@ -259,7 +281,10 @@ class HorizonRecorder:
         merged = Horizon(self.current.origin, merge_ranges(self.current.ranges, seen))
         if self.max_distortion is not None and np.linalg.norm(origin - merged.origin) > 0:
             own = Horizon(origin, horizon_from(pts, origin, self.band, self.bins, self.floor))
-            if distortion(self.current, own, merged) > self.max_distortion:
+            if (
+                distortion(self.current, own, merged) > self.max_distortion
+                or invented_run(self.current, own, merged) > MAX_INVENTED
+            ):
                 self._close()
                 merged = own
         self.current = merged
