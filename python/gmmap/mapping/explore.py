@@ -7,16 +7,16 @@ robots have joined their maps each explores alone, and after, they share one fro
 
 Choosing a goal: the frontiers of the union of every known horizon, minus those behind a
 surface (the GMM occupancy field), those a joined peer heads for from nearer than this robot
-(its goal within ``claim_radius``; a robot left none waits) and those given up. A
-route runs through the graph of viewpoints: consecutive viewpoints of one robot (it drove
-between them) and viewpoints within ``link_radius`` whose straight line is known free; a
-frontier's cost is the route to the cheapest viewpoint whose horizon holds its target plus
-the straight, observed line from there, or the straight line from the robot where that is
-known free. Frontiers with unknown space behind them come first, then large ones, then any.
-Moving: the GMM gradient planner steers towards the next waypoint on the team's field, zero
-where the robot's footprint is known free (EM spans a doorway with the wall's components; the
-horizons saw through it), and on a field of what the sensor saw since the last-but-one submap
-(a robot avoids what it has just seen, shared or not).
+(its goal within ``claim_radius``; a robot left none waits) and those given up. A route runs
+through the graph of viewpoints: consecutive viewpoints of one robot (it drove between them)
+and viewpoints within ``link_radius`` whose straight line is known free; a frontier's cost is
+the route to the cheapest viewpoint whose horizon holds its target plus the straight, observed
+line from there, or the straight line from the robot where that is known free. Frontiers with
+unknown space behind them come first, then large ones, then any. Moving: the GMM gradient
+planner steers towards the next waypoint on the team's field, zero where the robot's footprint
+is known free (EM spans a doorway with the wall's components; the horizons saw through it), and
+on a field of what the sensor saw since the last-but-one submap (a robot avoids what it has
+just seen, shared or not).
 """
 
 from __future__ import annotations
@@ -76,23 +76,17 @@ class Claim:
 
 def next_move(agent, stamp: float) -> tuple[np.ndarray | None, Claim | None]:
     """``agent.next_direction(stamp)`` (an `Explorer`, or anything with its ``claim``,
-    ``route`` and ``next_direction``) and the claim to tell its peers: its new one where its
-    goal moved by more than 5 cm or came or went, or where it chose again and kept its goal
-    (its peers weigh how near it is), else None."""
-    before = agent.claim().goal
+    ``route`` and ``next_direction``) and the claim to tell its peers where it chose a goal,
+    new or kept (they weigh how near it is), or its goal went; else None."""
+    had = agent.claim().goal is not None
     direction = agent.next_direction(stamp)
-    after = agent.claim()
-    if before is None or after.goal is None:
-        moved = (before is None) != (after.goal is None)
-    else:
-        moved = bool(np.linalg.norm(before - after.goal) > 0.05)
-    chose = agent.route is not None and agent.route.chosen_at == stamp
-    return direction, after if moved or chose else None
+    r = agent.route
+    changed = (r is not None and r.chosen_at == stamp) or (had and r is None)
+    return direction, agent.claim() if changed else None
 
 
 def moving_on(status: str) -> bool:
-    """Whether a robot with ``status`` still has somewhere to go: it explores, or waits while
-    its peers take the last frontiers (one may give up on its goal)."""
+    """Whether a robot with ``status`` explores, or waits for peers that may give up a goal."""
     return status == "exploring" or status.startswith("waiting")
 
 
@@ -148,19 +142,16 @@ class Explorer:
         if submap is None and self._share_now:
             submap = self.builder.flush()
         self._share_now = False
-        if submap is None:
-            return None
-        shared = SharedSubmap(submap, self.recorder.take(submap.anchor))
-        self._hold(shared)
-        return shared
+        return self._shared(submap)
 
     def flush(self) -> SharedSubmap | None:
         """The submap of the frames since the last one (the robot stops), to share."""
-        submap = self.builder.flush()
-        if submap is None:
-            return None
-        shared = SharedSubmap(submap, self.recorder.take(submap.anchor))
-        self._hold(shared)
+        return self._shared(self.builder.flush())
+
+    def _shared(self, submap: Submap | None) -> SharedSubmap | None:
+        shared = None if submap is None else SharedSubmap(submap, self.recorder.take(submap.anchor))
+        if shared is not None:
+            self._hold(shared)
         return shared
 
     def own_horizons(self) -> list[Horizon]:
@@ -175,8 +166,7 @@ class Explorer:
             self._hold(shared)
 
     def receive_claim(self, robot: str, claim: Claim) -> None:
-        """A peer's claim; where it takes this robot's goal, the next step chooses again (two
-        robots that chose at once do not both travel for the rest of ``replan_s``)."""
+        """A peer's claim; one that takes this robot's goal makes its next step choose again."""
         self.claims[robot] = claim
         if self.route is not None and self._taken(self.route.goal, self._joined_peers()):
             self.route.chosen_at = -math.inf
@@ -346,8 +336,7 @@ class Explorer:
             return
         peers = self._joined_peers()
         fronts = [f for f in fronts if not self._taken(f.goal, peers)]
-        if not fronts:
-            # Going too would only arrive after the peer and find nothing left to see.
+        if not fronts:  # following a peer, it would arrive after it and find nothing left
             self._stop("waiting: the frontiers left are nearer peers' goals")
             return
         dist, pred, start = self._distances(space, k, live)
@@ -385,8 +374,7 @@ class Explorer:
         self.status = "exploring"
 
     def _stop(self, status: str) -> None:
-        """No goal left: what the robot saw on its way goes to its peers at once, so that
-        none sets out for a frontier this robot has already seen past."""
+        """No goal left: its submap goes out at once, so that no peer sets out for its view."""
         self._share_now |= self.status == "exploring"
         self.route, self.status = None, status
 
@@ -440,9 +428,8 @@ class Explorer:
 
     def _taken(self, goal: np.ndarray, peers: list) -> bool:
         """Whether a joined peer heads for ``goal`` (its goal within ``claim_radius``) from
-        nearer than this robot is: then it is the peer's. A robot that is nearer keeps it or
-        takes it over, and the peer yields at its next choice (robots do not swap back and
-        forth). A claim's position is the peer's when it chose: it is nearer since."""
+        nearer than this robot is (where it last chose: nearer since); a nearer robot takes it
+        over and the peer yields at its next choice."""
         mine = float(np.linalg.norm(goal - self.position))
         return any(
             g is not None
