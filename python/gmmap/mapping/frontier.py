@@ -146,7 +146,7 @@ def invented_run(before: Horizon, view: Horizon, merged: Horizon, step: float = 
     pts = merged.origin + u[:, None, :] * steps[None, :, None]
     inside = steps[None, :] < merged.ranges[bins][:, None]
     known = FreeSpace([before, view]).contains(pts.reshape(-1, 2)).reshape(inside.shape)
-    run = best = np.zeros(len(bins))
+    run, best = np.zeros(len(bins)), np.zeros(len(bins))
     for column in (inside & ~known).T:  # longest run of unknown samples per direction
         run = np.where(column, run + step, 0.0)
         best = np.maximum(best, run)
