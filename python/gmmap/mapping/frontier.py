@@ -136,8 +136,9 @@ def distortion(before: Horizon, view: Horizon, merged: Horizon) -> float:
 def invented_run(before: Horizon, view: Horizon, merged: Horizon, step: float = 0.1) -> float:
     """The longest stretch (m) of one of ``merged``'s directions (its middle) that neither
     ``before`` nor ``view`` saw free: a wall between the view's position and the viewpoint,
-    which a share of samples hardly weighs, being thin (`distortion`)."""
-    bins = np.flatnonzero(np.isfinite(merged.ranges))
+    which a share of samples hardly weighs, being thin (`distortion`). Only the directions
+    the view changed can hold one: the rest lie inside ``before``."""
+    bins = np.flatnonzero(np.isfinite(merged.ranges) & (merged.ranges != before.ranges))
     if not len(bins):
         return 0.0
     steps = np.arange(step, np.nanmax(merged.ranges[bins]) + step / 2, step)
