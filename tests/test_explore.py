@@ -23,13 +23,11 @@ from gmmap.mapping.explore import Explorer
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import (
     FreeSpace,
-    Frontier,
     Horizon,
     HorizonRecorder,
     decode_horizons,
     encode_horizons,
     horizon_from,
-    ranked,
 )
 from gmmap.mapping.planner import OccupancyField
 from gmmap.math.gmm import Gmm
@@ -175,21 +173,6 @@ def test_a_frontier_is_open_only_where_unknown_space_lies_behind_it():
     assert space._open(probes, targets, wall_north).tolist() == [False, True, False, True]
     fronts = space.frontiers(wall_north)
     assert sum(f.open for f in fronts) < sum(f.size for f in fronts)
-
-
-def test_goals_rank_open_then_large_then_any_and_the_current_goal_keeps_its_place():
-    """A robot nearing a small frontier sees it shrink below ``min_frontier``; were it to drop
-    out, the robot would turn away, see it grow back, and swing between the two."""
-    sliver = Frontier(np.array([5.0, 0.0]), 0, size=8, open=0)
-    shrunk = Frontier(np.array([1.0, 0.0]), 0, size=2, open=2)
-    room = Frontier(np.array([9.0, 0.0]), 0, size=6, open=5)
-    ids = lambda fronts: [id(f) for f in fronts]  # noqa: E731
-    assert ids(ranked([sliver, shrunk, room], 3, None)) == ids([room])
-    assert ids(ranked([sliver, shrunk], 3, None)) == ids([sliver])
-    assert ids(ranked([shrunk], 3, None)) == ids([shrunk])
-    heading = np.array([1.2, 0.3])
-    assert ids(ranked([sliver, shrunk], 3, heading)) == ids([sliver, shrunk])
-    assert ids(ranked([shrunk, room], 3, room.goal)) == ids([room])
 
 
 def test_explore_options_are_checked():

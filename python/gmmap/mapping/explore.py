@@ -38,7 +38,6 @@ from gmmap.mapping.frontier import (
     HorizonRecorder,
     clear_lines,
     encode_horizons,
-    ranked,
     unit,
 )
 from gmmap.mapping.mapper import Mapper
@@ -324,6 +323,14 @@ class Explorer:
         here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
         self.failed += here
         fronts = [f for f in fronts if not self._failed_near(f.goal)]
+        # Small frontiers only once no large one is left: the far end of a corridor seen
+        # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
+        # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
+        fronts = (
+            [f for f in fronts if f.open >= o.min_frontier]
+            or [f for f in fronts if f.size >= o.min_frontier]
+            or fronts
+        )
         if not fronts:
             self._stop("done: no frontier left that it can reach")
             return
@@ -332,8 +339,6 @@ class Explorer:
         if not fronts:  # following a peer, it would arrive after it and find nothing left
             self._stop("waiting: the frontiers left are nearer peers' goals")
             return
-        # Ranked among those no peer took, else robots idle (random-office:101: two for 16 s).
-        fronts = ranked(fronts, o.min_frontier, None if self.route is None else self.route.goal)
         dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.

@@ -320,20 +320,6 @@ class Frontier:
     open: int = 0
 
 
-def ranked(fronts: list[Frontier], least: int, heading: np.ndarray | None) -> list[Frontier]:
-    """The frontiers worth a goal: open ones (``least`` open points or more) first, as a
-    sliver between two horizons against a mapped wall hides nothing; then large ones; then
-    any, as a corridor's far end seen lengthwise is a few probes wide. The one the robot heads
-    for (within 1 m of ``heading``) stays whatever its tier: a frontier a few probes wide
-    drops a tier as the robot nears it and returns as it turns away, and a robot that changes
-    goals with it swings back and forth (random-office:101, 20 s)."""
-    out = [f for f in fronts if f.open >= least] or [f for f in fronts if f.size >= least] or fronts
-    if heading is None:
-        return out
-    ours = [f for f in fronts if np.linalg.norm(f.goal - heading) < 1.0]
-    return out + [f for f in ours if all(f is not g for g in out)]
-
-
 class FreeSpace:
     """The union of horizons (all in one frame)."""
 
