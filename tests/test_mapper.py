@@ -87,7 +87,7 @@ def test_a_mapper_judges_each_pair_once(recorded):
 def test_a_local_map_holds_the_neighbours_in_the_candidates_frame(recorded):
     from dataclasses import replace
 
-    from gmmap.mapping.mapper import local_map
+    from gmmap.mapping.submap import local_map
 
     _, submaps = recorded
     a0, a1 = submaps["a"][:2]

@@ -261,6 +261,11 @@ class PlaceOptions:
     skip_recent: int = 2  #: A robot's latest own submaps, not candidates (they overlap the query)
     resample_points: int = 4096  #: Points sampled from a mixture to describe it (PointNetVLAD's)
     use_yaw_hint: bool = False  #: Verify from the descriptor's yaw instead of the full yaw search
+    # A narrow view (a depth camera's) is registered as a chain: its robot's submaps about
+    # it, out to ±chain, until their horizons see chain_view of the directions round it.
+    chain: int = 5  #: Register a narrow view with its robot's submaps up to ±this; 0: alone
+    chain_view: float = 0.95  #: ... until their horizons see this share of directions
+    chain_min_confidence: float = 0.3  #: Least C of a match where either side is a chain
     refine_neighbours: int = 2  #: Refine a match over the candidate robot's submaps ±this; 0: off
     max_refine_shift: float = 0.15  #: Reject a match the refinement moves more than this (m)
     # `gmmap.mapping.confusion`: the best C each submap reaches against its own robot's
@@ -281,13 +286,15 @@ class PlaceOptions:
         if (
             self.top_k < 1
             or self.resample_points < 2
-            or min(self.skip_recent, self.refine_neighbours, self.confusion_probes) < 0
+            or min(self.skip_recent, self.chain, self.refine_neighbours, self.confusion_probes) < 0
         ):
             raise InvalidInputError(
-                "top_k >= 1, resample_points >= 2, skip_recent, refine_neighbours and "
+                "top_k >= 1, resample_points >= 2, skip_recent, chain, refine_neighbours and "
                 "confusion_probes >= 0"
             )
         far = self.max_distance
+        if not 0 <= self.chain_view <= 1 or not 0 <= self.chain_min_confidence <= 1:
+            raise InvalidInputError("chain_view and chain_min_confidence must be in [0, 1]")
         if not 0 <= self.min_confidence <= 1 or not (far is None or 0 <= far <= 2):
             raise InvalidInputError("min_confidence in [0, 1], max_distance in [0, 2] or null")
         if self.descriptor not in DESCRIPTORS:

@@ -22,7 +22,7 @@ from scipy.optimize import minimize
 
 from gmmap.config import Config
 from gmmap.eval.merge import merge
-from gmmap.eval.sessions import is_right, truth_of
+from gmmap.eval.sessions import is_right
 from gmmap.mapping.calibration import FEATURES, SIGNS, Calibration, features
 from gmmap.mapping.submap import Submap
 
@@ -37,10 +37,10 @@ def labelled(
     config = config or Config()
     place = replace(config.place, min_conditioning=0.0, min_probability=None)
     mapper, _ = merge(sessions, replace(config, place=place))
-    held, pos, index = truth_of(sessions)
+    held = {(s.robot, s.seq): s for subs in sessions.values() for s in subs}
     verified = [m for m in mapper.matches if m.accepted]
     X = np.reshape([features(m) for m in verified], (-1, len(FEATURES)))
-    return X, np.array([is_right(m, held, pos, index) for m in verified], dtype=bool)
+    return X, np.array([is_right(m, held) for m in verified], dtype=bool)
 
 
 def fit(cases: Sequence[tuple[np.ndarray, np.ndarray]], source: str = "") -> Calibration:

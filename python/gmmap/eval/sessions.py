@@ -10,9 +10,11 @@ otherwise), then, from the outside:
 - ``positives``: the submap pairs of two sessions whose views overlap at the truth
   (`gmmap.eval.place.positives`), and ``positives_by_robots`` per robot pair ("a|b");
 - ``precision`` / ``recall`` of the verified (accepted) matches: a match is correct when its
-  two submaps are a positive (views overlapping at the truth, `gmmap.eval.place.positives`) and
-  its transform is within 0.2 m and 3° of the truth; recall counts over every positive pair of
-  the sessions, found by place recognition or not; ``kept_precision``: the same over the
+  transform is within 0.2 m and 3° of the truth (a chain's match can be, and its edge is as
+  good, where the two submaps themselves overlap too little to be a positive); recall counts
+  the correct matches of positive pairs (views overlapping at the truth,
+  `gmmap.eval.place.positives`) over every positive pair of the sessions, found by place
+  recognition or not; ``kept_precision``: the same over the
   matches the backend kept (those that shape the merged map); ``probability_brier``: the
   mean squared gap between each probability-scored match's `Match.probability` and whether
   it is right (`gmmap.mapping.calibration`; 0 is perfect, None when none was scored);
@@ -65,7 +67,7 @@ def evaluate_sessions(
         "positives_by_robots": by_robots(pos, [robot for robot, _ in order]),
         "candidates": len(mapper.matches),
         **verification(mapper.matches, held, pos, index),
-        "kept_precision": kept_precision(mapper, held, pos, index),
+        "kept_precision": kept_precision(mapper, held),
         "merge": report,
     }
     if gicp:
@@ -103,33 +105,37 @@ def truth_of(
     return held, pos, {k: i for i, k in enumerate(held)}
 
 
-def is_right(m: Match, held: Mapping, pos: np.ndarray, index: Mapping) -> bool:
-    """A positive pair registered within `is_correct`'s tolerance of the truth."""
-    return _positive(m, pos, index) and is_correct(m.registration.transform, *_pair(m, held))
+def is_right(m: Match, held: Mapping) -> bool:
+    """A pair registered within `is_correct`'s tolerance of the truth."""
+    return is_correct(m.registration.transform, *_pair(m, held))
 
 
 def verification(matches: Sequence[Match], held: Mapping, pos: np.ndarray, index: Mapping) -> dict:
     """Precision and recall of the accepted matches, and how many candidates registered right."""
-    right = [is_right(m, held, pos, index) for m in matches]
+    right = [is_right(m, held) for m in matches]
     accepted = [m.accepted for m in matches]
     n_positive = int(pos.sum() // 2)
     correct_accepted = sum(r and a for r, a in zip(right, accepted, strict=True))
+    recalled = sum(
+        r and a and _positive(m, pos, index)
+        for m, r, a in zip(matches, right, accepted, strict=True)
+    )
     scored = [
         (m.probability, r) for m, r in zip(matches, right, strict=True) if m.probability is not None
     ]
     return {
         "verified": sum(accepted),
         "precision": correct_accepted / sum(accepted) if any(accepted) else None,
-        "recall": correct_accepted / n_positive if n_positive else None,
+        "recall": recalled / n_positive if n_positive else None,
         "candidates_registered_right": sum(right),
         "probability_brier": float(np.mean([(p - r) ** 2 for p, r in scored])) if scored else None,
     }
 
 
-def kept_precision(mapper, held: Mapping, pos: np.ndarray, index: Mapping) -> float | None:
+def kept_precision(mapper, held: Mapping) -> float | None:
     """The share of the backend's kept matches that are correct (None when it kept none)."""
     kept = [mapper.edge_matches[e] for e in (mapper.result.accepted if mapper.result else [])]
-    right = [is_right(m, held, pos, index) for m in kept]
+    right = [is_right(m, held) for m in kept]
     return sum(right) / len(right) if right else None
 
 

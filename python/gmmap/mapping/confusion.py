@@ -28,6 +28,7 @@ import numpy as np
 
 from gmmap.mapping.place import PlaceDatabase
 from gmmap.mapping.submap import Submap
+from gmmap.math.gmm import Gmm
 from gmmap.math.register import Registration, confidence
 
 Node = tuple[str, int]
@@ -52,11 +53,14 @@ def confusion(
     db: PlaceDatabase,
     probes: int,
     plausible: Callable[[Node, Registration], float] | None = None,
+    gmm: Callable[[Node], Gmm] | None = None,
 ) -> Confusion:
     """The best no-guess confidence of submap ``key`` against up to ``probes`` of its robot's
     other held submaps that odometry puts apart, the most alike by descriptor first.
     ``plausible(other, registration)``: the confidence of that registration's best solution
-    the free space leaves possible (0 where none); None: every solution is."""
+    the free space leaves possible (0 where none); None: every solution is. ``gmm(node)``: the
+    mixture a held submap is registered as (default: its own)."""
+    gmm = gmm or (lambda node: held[node].gmm)
     query = held[key]
     own = [k for k in held if k[0] == key[0] and k != key]
     if probes < 1 or not own:
@@ -67,9 +71,9 @@ def confusion(
     for i in np.argsort(distance, kind="stable"):
         other = held[own[i]]
         odometry = np.linalg.inv(other.anchor) @ query.anchor
-        if confidence(query.gmm, other.gmm, odometry) >= APART:
+        if confidence(gmm(key), gmm(own[i]), odometry) >= APART:
             continue
-        reg = db.register_pair(query.gmm, other.gmm)
+        reg = db.register_pair(gmm(key), gmm(own[i]))
         level = max(level, reg.confidence)
         possible = max(possible, reg.confidence if plausible is None else plausible(own[i], reg))
         tried += 1

@@ -41,7 +41,7 @@ from gmmap.mapping.place import (
     distinct,
     turned,
 )
-from gmmap.mapping.submap import Submap
+from gmmap.mapping.submap import Submap, chain_of, horizons_in, local_map
 from gmmap.mapping.tfgraph import TfGraph
 from gmmap.math.gmm import Gmm
 from gmmap.math.register import Registration, register
@@ -78,6 +78,8 @@ class Mapper:
         # (query, candidate) → its registration before refinement: deterministic, so reusable.
         self._registrations: dict[tuple[Node, Node], Registration] = {}
         self._confusions: dict[Node, Confusion] = {}
+        # Each submap's chain (`_members`) and how many submaps were held when it was found.
+        self._chains: dict[Node, tuple[int, list[Submap]]] = {}
         # Free space each submap's robot saw (its horizons, anchor frame), where given.
         self.horizons: dict[Node, list[Horizon]] = {}
         self._lock = threading.Lock()
@@ -142,14 +144,39 @@ class Mapper:
         reg = self._registrations.get(key)
         if reg is None:
             reg = self._registrations[key] = self.register_pair(s, key[1])
-        return self.db.judge(key[0], c, reg)
+        chained = len(self._members(key[0])) > 1 or len(self._members(key[1])) > 1
+        least = self.config.place.chain_min_confidence if chained else None
+        return self.db.judge(key[0], c, reg, least)
 
     def register_pair(self, query: Submap, key: Node) -> Registration:
         """What verification registers ``query`` onto held submap ``key`` with: no initial
         guess, then the basins that fill either robot's seen free space dropped."""
+        source, target = self._chain((query.robot, query.seq)), self._chain(key)
+        return self._free_basin(query, key, self.db.register_pair(source, target))
+
+    def _members(self, key: Node) -> list[Submap]:
+        """Held submap ``key`` and its chain: its robot's held submaps within k of it, k the
+        least up to ``place.chain`` whose horizons see ``place.chain_view`` of the directions
+        round it (a depth camera's view is narrow; a 360° LiDAR's needs none). Where its
+        horizons are unknown, ``key`` alone."""
         with self._lock:
-            target = self.submaps[key].gmm
-        return self._free_basin(query, key, self.db.register_pair(query.gmm, target))
+            held = len(self.submaps)
+            cached = self._chains.get(key)
+            if cached is not None and cached[0] == held:
+                return cached[1]
+            chain = chain_of(key, self.submaps, self.config.place)
+            self._chains[key] = (held, chain)
+        return chain
+
+    def _chain(self, key: Node) -> Gmm:
+        """What verification registers held submap ``key`` as: it alone, or with its chain
+        (`_members`) in its anchor frame."""
+        members = self._members(key)
+        if len(members) == 1:
+            return members[0].gmm
+        with self._lock:
+            frame = self.submaps[key].anchor
+        return local_map(members, frame)
 
     def _free_basins(self, query: Submap, key: Node, reg: Registration) -> tuple | None:
         """``reg``'s basins that put at most ``max_seen_through`` of either submap's surfaces
@@ -173,11 +200,10 @@ class Mapper:
         alternative = free[1][1] if len(free) > 1 else 0.0
         if free[0][0] is reg.basins[0][0]:
             return replace(reg, alternative_confidence=alternative, basins=free)
-        with self._lock:
-            target = self.submaps[key].gmm
+        source, target = self._chain((query.robot, query.seq)), self._chain(key)
         # Its information and confidence where it ends, at the search's finest scale.
         scale = self.config.register.global_scales[-1:]
-        r = register(query.gmm, target, free[0][0], scales=scale, options=self.config.register)
+        r = register(source, target, free[0][0], scales=scale, options=self.config.register)
         return replace(
             r,
             iterations=reg.iterations + r.iterations,
@@ -195,20 +221,27 @@ class Mapper:
         return free[0][1] if free else 0.0
 
     def _free_view(self, key: Node) -> tuple[list[Horizon], np.ndarray, tuple, float] | None:
-        """The free space held submap ``key``'s robot saw: its horizons (anchor frame), the
-        anchor, the heights (map frame) they hold and the `seen_through` reach; None where
-        unknown. An exploring robot's (given to `add`) are at the heights its body occupies, a
-        built submap's about its anchor."""
+        """The free space held submap ``key``'s robot saw, over its chain (`_members`): the
+        horizons (its anchor frame), the anchor, the heights (map frame) they hold and the
+        `seen_through` reach; None where unknown. An exploring robot's (given to `add`) are at
+        the heights its body occupies, a built submap's about its anchor."""
+        members = self._members(key)
         with self._lock:
-            s, given = self.submaps[key], self.horizons.get(key)
-        if given is not None:
-            return given, s.anchor, self.config.planner.z_band, 0.0
+            s = self.submaps[key]
+            given = {(m.robot, m.seq): self.horizons.get((m.robot, m.seq)) for m in members}
+        inverse = np.linalg.inv(s.anchor)
+        if given[key] is not None:
+            views = [(m, given[(m.robot, m.seq)]) for m in members]
+            return horizons_in(views, inverse), s.anchor, self.config.planner.z_band, 0.0
         if s.horizons is None or s.horizon_band is None:
             return None
+        views = [(m, m.horizons) for m in members]
         # Its rays ran about the sensor's height: a surface counts where it spans that height
         # (a table top under the rays does not).
         z = float(s.anchor[2, 3]) + sum(s.horizon_band) / 2
-        near = [Horizon(h.origin, np.minimum(h.ranges, FREE_RANGE)) for h in s.horizons]
+        near = [
+            Horizon(h.origin, np.minimum(h.ranges, FREE_RANGE)) for h in horizons_in(views, inverse)
+        ]
         return near, s.anchor, (z - RAY_BAND, z + RAY_BAND), REACH
 
     def _seen_through(self, query: Submap, key: Node, T: np.ndarray) -> float | None:
@@ -218,11 +251,10 @@ class Mapper:
         mine, theirs = self._free_view((query.robot, query.seq)), self._free_view(key)
         if mine is None or theirs is None:
             return None
-        with self._lock:
-            candidate = self.submaps[key].gmm
+        source, target = self._chain((query.robot, query.seq)), self._chain(key)
         return max(
-            seen_through(*mine[:2], candidate.transform(np.linalg.inv(T)), *mine[2:]),
-            seen_through(*theirs[:2], query.gmm.transform(T), *theirs[2:]),
+            seen_through(*mine[:2], target.transform(np.linalg.inv(T)), *mine[2:]),
+            seen_through(*theirs[:2], source.transform(T), *theirs[2:]),
         )
 
     def _unseen(self, query: Submap, m: Match) -> Match:
@@ -256,9 +288,9 @@ class Mapper:
         limit = self.config.place.max_turned
         if limit is None:
             return m
-        with self._lock:
-            candidate = self.submaps[(m.candidate.robot, m.candidate.seq)].gmm
-        ratio = turned(query.gmm, candidate, m.registration, self.config.register)
+        source = self._chain((query.robot, query.seq))
+        target = self._chain((m.candidate.robot, m.candidate.seq))
+        ratio = turned(source, target, m.registration, self.config.register)
         return replace(m, accepted=ratio < limit, turned=ratio)
 
     def _confusion(self, key: Node) -> Confusion:
@@ -269,7 +301,12 @@ class Mapper:
             probes = self.config.place.confusion_probes
             query = held[key]
             self._confusions[key] = confusion(
-                key, held, self.db, probes, lambda other, reg: self._plausible(query, other, reg)
+                key,
+                held,
+                self.db,
+                probes,
+                lambda other, reg: self._plausible(query, other, reg),
+                self._chain,
             )
         return self._confusions[key]
 
@@ -287,22 +324,24 @@ class Mapper:
         return fresh
 
     def _refined(self, query: Submap, m: Match) -> Match:
-        """``m`` with its pose refined against the candidate's local map, or rejected when
-        that moves it more than ``max_refine_shift`` (`PlaceOptions.refine_neighbours`); its
-        confidence stays the verification's."""
+        """``m`` with its pose (the query's chain's) refined against the candidate's local map
+        (its chain and ±``refine_neighbours``), or rejected when that moves it more than
+        ``max_refine_shift``; its confidence stays the verification's."""
         options = self.config.place
         k = options.refine_neighbours
         if k == 0:
             return m
         c = m.candidate
+        chain = self._members((c.robot, c.seq))
         with self._lock:
             near = [
                 s for (robot, seq), s in self.submaps.items()
-                if robot == c.robot and abs(seq - c.seq) <= k
+                if robot == c.robot and (abs(seq - c.seq) <= k or s in chain)
             ]  # fmt: skip
             frame = self.submaps[(c.robot, c.seq)].anchor
         local = local_map(near, frame)
-        r = register(query.gmm, local, m.registration.transform, options=self.config.register)
+        source = self._chain((query.robot, query.seq))
+        r = register(source, local, m.registration.transform, options=self.config.register)
         shift = np.linalg.norm(r.transform[:3, 3] - m.registration.transform[:3, 3])
         if shift > options.max_refine_shift:
             return replace(m, accepted=False)
@@ -424,17 +463,3 @@ class Mapper:
             },
             "backend_time_s": b.time_s,
         }
-
-
-def local_map(submaps: Sequence[Submap], frame: np.ndarray) -> Gmm:
-    """One mixture of ``submaps`` in the anchor ``frame`` of their robot's map, each submap
-    weighted by its point count."""
-    inverse = np.linalg.inv(frame)
-    parts = [s.gmm.transform(inverse @ s.anchor) for s in submaps]
-    counts = [max(s.n_points, 1) for s in submaps]
-    weights = np.concatenate([g.weights * n for g, n in zip(parts, counts, strict=True)])
-    return Gmm(
-        weights / weights.sum(),
-        np.concatenate([g.means for g in parts]),
-        np.concatenate([g.covariances for g in parts]),
-    )

@@ -324,9 +324,17 @@ class PlaceDatabase:
             raise InvalidInputError(f"{candidate.robot}/{candidate.seq} has no GMM to verify")
         return self.judge((robot, seq), candidate, self.register_pair(gmm, target))
 
-    def judge(self, query: tuple[str, int], candidate: Candidate, reg: Registration) -> Match:
-        """The match of a registered pair, accepted when its `score` ≥ ``min_confidence``."""
-        return Match(query, candidate, reg, self.score(reg) >= self.options.min_confidence)
+    def judge(
+        self,
+        query: tuple[str, int],
+        candidate: Candidate,
+        reg: Registration,
+        least: float | None = None,
+    ) -> Match:
+        """The match of a registered pair, accepted when its `score` ≥ ``least`` (default:
+        ``min_confidence``)."""
+        least = self.options.min_confidence if least is None else least
+        return Match(query, candidate, reg, self.score(reg) >= least)
 
     def register_pair(self, query: Gmm, target: Gmm) -> Registration:
         """`register` with no initial guess, from the descriptor's yaw hint when it has one."""

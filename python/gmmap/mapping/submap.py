@@ -41,7 +41,7 @@ from gmmap.math.fileio import load_npz, save_npz
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import voxel_filter
 from gmmap.math.select import select_components
-from gmmap.options import BuildOptions, SelectOptions
+from gmmap.options import BuildOptions, PlaceOptions, SelectOptions
 
 FILE_FORMAT = "gmmap submap"
 FILE_VERSION = 1
@@ -402,3 +402,37 @@ def read_submaps(folder: str | os.PathLike) -> list[Submap]:
         raise FileNotFoundError(f"{folder}: no index.json (not a submap folder from gmmap build)")
     index = json.loads((folder / "index.json").read_text())
     return [Submap.load(submap_path(folder, s["seq"])) for s in index["submaps"]]
+
+
+def local_map(submaps: Sequence[Submap], frame: np.ndarray) -> Gmm:
+    """One mixture of ``submaps`` in the anchor ``frame`` of their robot's map, each submap
+    weighted by its point count."""
+    inverse = np.linalg.inv(frame)
+    parts = [s.gmm.transform(inverse @ s.anchor) for s in submaps]
+    return concatenate(parts, [max(s.n_points, 1) for s in submaps])
+
+
+def horizons_in(views: Iterable[tuple[Submap, list[Horizon] | None]], inverse: np.ndarray):
+    """The horizons of each (submap, its horizons) in the frame ``inverse`` maps its map to."""
+    return [h.moved(inverse @ s.anchor) for s, hs in views for h in hs or ()]
+
+
+def chain_of(key: tuple[str, int], held: dict, options: PlaceOptions) -> list[Submap]:
+    """Submap ``held[key]`` and its chain: its robot's submaps in ``held`` within k of it, k the
+    least up to ``options.chain`` whose horizons see ``options.chain_view`` of the directions
+    round it (a depth camera's view is narrow; a 360° LiDAR's needs none). Where its horizons
+    are unknown, the submap alone."""
+    s = held[key]
+    if not s.horizons:
+        return [s]
+    own = [t for (robot, _), t in held.items() if robot == key[0]]
+    inverse = np.linalg.inv(s.anchor)
+    chain, seen = [], np.zeros(len(s.horizons[0].ranges), bool)
+    for k in range(options.chain + 1):
+        ring = [t for t in own if abs(t.seq - key[1]) == k]
+        chain += ring
+        for h in horizons_in([(t, t.horizons) for t in ring], inverse):
+            seen |= ~np.isnan(h.ranges)
+        if seen.mean() >= options.chain_view:
+            break
+    return sorted(chain, key=lambda t: t.seq)
