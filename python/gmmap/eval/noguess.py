@@ -7,8 +7,9 @@ recognition or not. Per method: how many pairs it registers within 0.2 m and 3°
 (`gmmap.eval.place.is_correct`), and its mean time per pair:
 
 - ``gmmap``: `PlaceDatabase.register_pair` on the two mixtures: the registration alone;
-- ``gmmap_free_space``: `Mapper.register_pair`, what `Mapper` verifies with: the same, less
-  the solutions that put surfaces where either robot saw free space (both submaps' horizons);
+- ``gmmap_free_space``: `Mapper.register_pair`, what `Mapper` verifies with: the same on
+  the chains it registers a narrow view as (`PlaceOptions.chain`), less the solutions that put
+  surfaces where either robot saw free space (the chains' horizons);
 - ``from_truth``: the same registration started at the truth, the objective's ceiling: a pair
   it gets wrong is one where the right alignment is no basin of the correlation C (a depth
   camera's view of a wall slides along it), which no search without a guess can find;

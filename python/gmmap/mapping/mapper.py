@@ -75,8 +75,9 @@ class Mapper:
         self.result: BackendResult | None = None
         self.frames = TfGraph()
         self._judged: set[frozenset[Node]] = set()
-        # (query, candidate) → its registration before refinement: deterministic, so reusable.
-        self._registrations: dict[tuple[Node, Node], Registration] = {}
+        # (query, candidate, their chains' lengths) → its registration before refinement:
+        # deterministic, so reusable.
+        self._registrations: dict[tuple[Node, Node, tuple[int, int]], Registration] = {}
         self._confusions: dict[Node, Confusion] = {}
         # Each submap's chain (`_members`) and how many submaps were held when it was found.
         self._chains: dict[Node, tuple[int, list[Submap]]] = {}
@@ -140,13 +141,15 @@ class Mapper:
         return matches
 
     def _verified(self, s: Submap, c: Candidate) -> Match:
-        key = ((s.robot, s.seq), (c.robot, c.seq))
-        reg = self._registrations.get(key)
+        pair = ((s.robot, s.seq), (c.robot, c.seq))
+        # Live, a chain grows as its robot's later submaps arrive: a registration is reused
+        # only by the same chains.
+        chains = tuple(len(self._members(node)) for node in pair)
+        reg = self._registrations.get((*pair, chains))
         if reg is None:
-            reg = self._registrations[key] = self.register_pair(s, key[1])
-        chained = len(self._members(key[0])) > 1 or len(self._members(key[1])) > 1
-        least = self.config.place.chain_min_confidence if chained else None
-        return self.db.judge(key[0], c, reg, least)
+            reg = self._registrations[(*pair, chains)] = self.register_pair(s, pair[1])
+        least = self.config.place.chain_min_confidence if max(chains) > 1 else None
+        return self.db.judge(pair[0], c, reg, least)
 
     def register_pair(self, query: Submap, key: Node) -> Registration:
         """What verification registers ``query`` onto held submap ``key`` with: no initial
@@ -332,11 +335,11 @@ class Mapper:
         if k == 0:
             return m
         c = m.candidate
-        chain = self._members((c.robot, c.seq))
+        chain = {s.seq for s in self._members((c.robot, c.seq))}
         with self._lock:
             near = [
                 s for (robot, seq), s in self.submaps.items()
-                if robot == c.robot and (abs(seq - c.seq) <= k or s in chain)
+                if robot == c.robot and (abs(seq - c.seq) <= k or seq in chain)
             ]  # fmt: skip
             frame = self.submaps[(c.robot, c.seq)].anchor
         local = local_map(near, frame)
