@@ -109,7 +109,11 @@ def test_a_node_maps_ros2_topics_and_publishes_its_map_and_status(tmp_path, fmt)
                 sent = ros2.typestore("jazzy").deserialize_cdr(outputs[map_key], ros2.MARKER_ARRAY)
                 return [m for m in sent.markers if m.action == 0]
 
-            assert wait(lambda: len(shown()) == len(node.global_map().gmm) > 0, 15)
+            def drawn() -> bool:  # the map is built once the node has optimised its graph
+                built = node.global_map()
+                return built is not None and len(shown()) == len(built.gmm) > 0
+
+            assert wait(drawn, 15)
             assert {m.ns for m in shown()} == {"a"}
             status_key = key(fmt, "/gmmap/status", ros2.STRING)
 
