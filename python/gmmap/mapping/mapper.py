@@ -79,8 +79,9 @@ class Mapper:
         # deterministic, so reusable.
         self._registrations: dict[tuple[Node, Node, tuple[int, int]], Registration] = {}
         self._confusions: dict[Node, Confusion] = {}
-        # Each submap's chain (`_members`) and how many submaps were held when it was found.
-        self._chains: dict[Node, tuple[int, list[Submap]]] = {}
+        # Each submap's chain (`_members`) and its mixture, with how many submaps were held
+        # when they were made.
+        self._chains: dict[Node, tuple[int, list[Submap], Gmm]] = {}
         # Free space each submap's robot saw (its horizons, anchor frame), where given.
         self.horizons: dict[Node, list[Horizon]] = {}
         self._lock = threading.Lock()
@@ -158,28 +159,28 @@ class Mapper:
         return self._free_basin(query, key, self.db.register_pair(source, target))
 
     def _members(self, key: Node) -> list[Submap]:
-        """Held submap ``key`` and its chain: its robot's held submaps within k of it, k the
-        least up to ``place.chain`` whose horizons see ``place.chain_view`` of the directions
-        round it (a depth camera's view is narrow; a 360° LiDAR's needs none). Where its
-        horizons are unknown, ``key`` alone."""
+        """Held submap ``key`` and its chain among the submaps held now (`chain_of`)."""
+        return self._chain_of(key)[0]
+
+    def _chain(self, key: Node) -> Gmm:
+        """What verification registers held submap ``key`` as: it alone, or its chain
+        (`_members`) merged in its anchor frame."""
+        return self._chain_of(key)[1]
+
+    def _chain_of(self, key: Node) -> tuple[list[Submap], Gmm]:
+        """``key``'s chain and its mixture, made once per count of held submaps: verification
+        asks for them for every basin and lookalike it checks."""
         with self._lock:
             held = len(self.submaps)
             cached = self._chains.get(key)
             if cached is not None and cached[0] == held:
-                return cached[1]
-            chain = chain_of(key, self.submaps, self.config.place)
-            self._chains[key] = (held, chain)
-        return chain
-
-    def _chain(self, key: Node) -> Gmm:
-        """What verification registers held submap ``key`` as: it alone, or with its chain
-        (`_members`) in its anchor frame."""
-        members = self._members(key)
-        if len(members) == 1:
-            return members[0].gmm
+                return cached[1], cached[2]
+            members = chain_of(key, self.submaps, self.config.place)
+            s = self.submaps[key]
+        gmm = s.gmm if len(members) == 1 else local_map(members, s.anchor)
         with self._lock:
-            frame = self.submaps[key].anchor
-        return local_map(members, frame)
+            self._chains[key] = (held, members, gmm)
+        return members, gmm
 
     def _free_basins(self, query: Submap, key: Node, reg: Registration) -> tuple | None:
         """``reg``'s basins that put at most ``max_seen_through`` of either submap's surfaces
