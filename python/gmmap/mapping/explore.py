@@ -51,6 +51,7 @@ Node = tuple[str, int]
 # between two of 8, where a depth camera's robot, blind beside it, drove into walls).
 RING = np.linspace(0, 2 * math.pi, 16, endpoint=False)
 SWITCH_COST = 2.0  # metres of route a new goal must save to replace the current one
+TRIES = 3  # times a goal is given up before it is left for good
 
 
 @dataclass
@@ -321,8 +322,12 @@ class Explorer:
         fronts = space.frontiers(self._blocked(live, space))
         # A frontier whose target is where the robot stands is one it cannot see past.
         here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
-        self.failed += here
-        fronts = [f for f in fronts if not self._failed_near(f.goal)]
+        self.failed += here * TRIES
+        # Goals given up on come last, and back once nothing else is left: the planner may
+        # have stuck on what the team had not seen yet (random-office:102: a robot alone
+        # gave up four goals and said "done" at 80 %).
+        tries = [self._tries(f.goal) for f in fronts]
+        fronts = [f for f, n in zip(fronts, tries, strict=True) if n == min(tries) < TRIES]
         # Small frontiers only once no large one is left: the far end of a corridor seen
         # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
         # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
@@ -443,8 +448,9 @@ class Explorer:
         mine = float(np.linalg.norm(goal - self.position))
         return sum(max(0.0, mine - float(np.linalg.norm(goal - p))) for p, _ in peers)
 
-    def _failed_near(self, goal: np.ndarray) -> bool:
-        return any(np.linalg.norm(goal - g) < 0.75 for g in self.failed)
+    def _tries(self, goal: np.ndarray) -> int:
+        """Times a goal near ``goal`` was given up (``TRIES`` for one it cannot see past)."""
+        return sum(np.linalg.norm(goal - g) < 0.75 for g in self.failed)
 
     # ---- moving -----------------------------------------------------------------------------
 

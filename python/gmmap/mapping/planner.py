@@ -216,6 +216,7 @@ class Route:
     best: float = math.inf
     since_best: int = 0
     planner: GradientPlanner | None = None
+    turned_back: bool = False
 
     def next_waypoint(self, position: np.ndarray) -> np.ndarray | None:
         """Passes the waypoints within ``ARRIVED`` of ``position`` and returns the next one
@@ -239,11 +240,15 @@ class Route:
     ) -> np.ndarray | None:
         """The planner's unit direction towards ``target`` on ``field`` (one planner per route:
         the side it follows round an obstacle stays); None when every direction is refused or
-        the robot has got no closer for ``STUCK_STEPS``."""
+        the robot has got no closer for ``STUCK_STEPS``. Halfway there it goes round the other
+        side, once: passing a door jamb at an angle, the gentler side can be the wall beside
+        the door (random-office:102 lost four goals so)."""
         if self.since_best >= STUCK_STEPS:
             return None
         if self.planner is None:
             self.planner = GradientPlanner(None, options, field)
+        if self.since_best >= STUCK_STEPS // 2 and self.planner.side and not self.turned_back:
+            self.planner.side, self.turned_back, self.since_best = -self.planner.side, True, 0
         self.planner.field = field
         return self.planner.choose(position, target)
 
@@ -266,7 +271,7 @@ class GradientPlanner:
         offsets = [(0, 0)] + [(k, s) for k in range(1, half) for s in (1, -1)] + [(half, 1)]
         self._offsets = np.array(offsets)
         self._sector = step
-        self._side = 0  # the side (+1 left, -1 right) followed round an obstacle; 0: none
+        self.side = 0  # the side (+1 left, -1 right) followed round an obstacle; 0: none
 
     def choose(self, position: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         """The unit direction of the next step, or None when every direction is refused."""
@@ -283,11 +288,11 @@ class GradientPlanner:
         k, side = self._offsets[:, 0], self._offsets[:, 1]
         # Committed to a side: the goal, then round that side, then the other; otherwise the
         # paper's order, the gentler slope first at equal angles.
-        keys = (k, side != self._side, k > 0) if self._side else (slope, k)
+        keys = (k, side != self.side, k > 0) if self.side else (slope, k)
         order = np.lexsort(keys)
         for i in order:
             if allowed[i]:
-                self._side = int(side[i]) if k[i] else 0
+                self.side = int(side[i]) if k[i] else 0
                 return dirs[i]
         return None
 
