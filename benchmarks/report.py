@@ -97,8 +97,8 @@ DESCRIPTIONS: dict[str, str] = {
     "and how it grows with the map's component count. Baseline: one full A* plan on a 5 cm "
     "grid of the same scans (`astar_over_gmm`: how many GMM steps one A* plan costs).",
     "explore": "Simulated robots exploring procedural offices never used while the explorer "
-    "was written (`gmmap explore`, random-office:101 with the 16-beam LiDAR and with the "
-    "depth camera, 3 robots, 300 simulated seconds at most; `sweep`: the team alone on more "
+    "was written (`gmmap explore`, random-office:101 and 102 with the 16-beam LiDAR, 101 with "
+    "the depth camera, 3 robots, 300 simulated seconds at most; `sweep`: the team alone on more "
     "worlds with both sensors, 150 s): "
     "coverage of the true world's surfaces and floor, time to 90 % surface coverage, "
     "collisions and bytes sent. Baselines in the same run: one robot alone, the same robots "
@@ -325,6 +325,17 @@ SCOREBOARD: tuple[Row, ...] = (
         (
             ("dense bytes / GMM bytes", ("cases", "sensor=lidar", "bytes_dense_over_gmm")),
             ("collisions in every run, LiDAR and depth", ("collisions",)),
+        ),
+    ),
+    _explore(
+        " in a second world",
+        "world=random-office:102",
+        "random-office:102, 16-beam LiDAR, 3 robots",
+        (
+            (
+                "one robot alone",
+                ("cases", "world=random-office:102", "runs", "alone", "time_to_90_s"),
+            ),
         ),
     ),
     _explore(
