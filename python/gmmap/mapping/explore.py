@@ -320,13 +320,11 @@ class Explorer:
         o = self.options
         space = self.space()
         fronts = space.frontiers(self._blocked(live, space))
-        # A frontier whose target is where the robot stands is one it cannot see past.
+        # A goal where it stands it cannot see past: given up for good. Others given up come
+        # last, back once nothing else is left (a route may stick on what nobody saw yet).
         here = [f.goal for f in fronts if np.linalg.norm(f.goal - self.position) < ARRIVED]
         self.failed += here * TRIES
-        # Goals given up on come last, and back once nothing else is left: the planner may
-        # have stuck on what the team had not seen yet (random-office:102: a robot alone
-        # gave up four goals and said "done" at 80 %).
-        tries = [self._tries(f.goal) for f in fronts]
+        tries = [sum(np.linalg.norm(f.goal - g) < 0.75 for g in self.failed) for f in fronts]
         fronts = [f for f, n in zip(fronts, tries, strict=True) if n == min(tries) < TRIES]
         # Small frontiers only once no large one is left: the far end of a corridor seen
         # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
@@ -447,10 +445,6 @@ class Explorer:
         """A cost for goals nearer a joined peer than this robot: robots spread out."""
         mine = float(np.linalg.norm(goal - self.position))
         return sum(max(0.0, mine - float(np.linalg.norm(goal - p))) for p, _ in peers)
-
-    def _tries(self, goal: np.ndarray) -> int:
-        """Times a goal near ``goal`` was given up (``TRIES`` for one it cannot see past)."""
-        return sum(np.linalg.norm(goal - g) < 0.75 for g in self.failed)
 
     # ---- moving -----------------------------------------------------------------------------
 
