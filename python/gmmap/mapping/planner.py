@@ -242,7 +242,7 @@ class Route:
         the side it follows round an obstacle stays); None when every direction is refused or
         the robot has got no closer for ``STUCK_STEPS``. Halfway there it goes round the other
         side, once: passing a door jamb at an angle, the gentler side can be the wall beside
-        the door (random-office:102 lost four goals so)."""
+        the door (traced on random-office:102)."""
         if self.since_best >= STUCK_STEPS:
             return None
         if self.planner is None:
