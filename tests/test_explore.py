@@ -19,7 +19,7 @@ from gmmap.eval.explore.team import run_explore
 from gmmap.io.sim import World, sim_sensor
 from gmmap.io.sim.run import floor_pose, sensed
 from gmmap.io.sim.world import slab, wall
-from gmmap.mapping.explore import Explorer
+from gmmap.mapping.explore import TRIES, Explorer
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import (
     FreeSpace,
@@ -173,6 +173,61 @@ def test_a_frontier_is_open_only_where_unknown_space_lies_behind_it():
     assert space._open(probes, targets, wall_north).tolist() == [False, True, False, True]
     fronts = space.frontiers(wall_north)
     assert sum(f.open for f in fronts) < sum(f.size for f in fronts)
+
+
+def test_a_blocked_target_moves_back_along_its_line_only_as_far_as_clears_it():
+    """A surface across the line to a far frontier's target (a door jamb seen at a slant)
+    moves the target back towards the viewpoint by the least step that clears it: from
+    nearer, the robot could not see past the opening."""
+    ranges = np.full(72, np.nan)
+    ranges[:9] = 8.0  # 45° of view, 8 m deep: the far frontier's target lies at 7.6 m
+    space = FreeSpace([Horizon(np.zeros(2), ranges)])
+
+    def far_target(ring: tuple[float, float]) -> float:
+        def blocked(xy):
+            r = np.hypot(*np.asarray(xy).T)
+            return (r > ring[0]) & (r < ring[1])
+
+        fronts = space.frontiers(blocked)
+        far = max(fronts, key=lambda f: np.hypot(*f.goal))
+        assert not blocked(far.goal[None])[0]
+        return float(np.hypot(*far.goal))
+
+    assert far_target((0.0, 0.0)) == pytest.approx(7.6, abs=0.05)
+    assert far_target((7.5, 7.7)) == pytest.approx(7.35, abs=0.05)  # back 0.25 m
+    assert far_target((7.0, 7.7)) == pytest.approx(6.6, abs=0.05)  # back 1 m, not a quarter
+
+
+def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
+    """Goals the planner gave up on come last, are tried again once no other is left, and
+    are left for good after ``TRIES``; a goal the robot stands on is left at once."""
+    angle = (np.arange(72) + 0.5) * 2 * np.pi / 72
+    explorer = Explorer("robot_0", config("corridor", 1))
+    explorer.recorder.closed = [
+        Horizon(np.zeros(2), np.minimum(8.0, 0.7 / np.maximum(np.abs(np.sin(angle)), 1e-9)))
+    ]
+    along = np.arange(-9.0, 9.0, 0.1)
+    pts = np.vstack(
+        [np.c_[along, np.full_like(along, y), np.full_like(along, 0.5)] for y in (-0.8, 0.8)]
+    )
+    seen = Gmm(np.full(len(pts), 1 / len(pts)), pts, np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1)))
+    live = OccupancyField(seen, explorer.planner_options)
+
+    def goal(failed: list, at=(0.0, 0.0)):
+        explorer.failed, explorer.route = list(failed), None
+        explorer.position = np.array(at)
+        explorer._choose(0.0, live)
+        return None if explorer.route is None else explorer.route.goal
+
+    east = goal([])  # the corridor's two ends, 7.6 m either way
+    west = goal([east])
+    assert abs(east[0]) > 7.0 and west[0] == pytest.approx(-east[0], abs=0.1)
+    np.testing.assert_allclose(goal([east, west]), east)  # both failed once: back to the first
+    assert goal([east, west] * TRIES) is None
+    assert explorer.status == "done: no frontier left that it can reach"
+    # Standing on one end while it stays a frontier: the other, then nothing.
+    np.testing.assert_allclose(goal([], at=east), west)
+    assert len(explorer.failed) == TRIES and goal(explorer.failed + [west] * TRIES) is None
 
 
 def test_explore_options_are_checked():

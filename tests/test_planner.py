@@ -9,7 +9,7 @@ from click.testing import CliRunner
 from gmmap import Gmm, InvalidInputError
 from gmmap.cli import main
 from gmmap.eval.planner import astar, evaluate_scene, occupancy_grid, shortcut
-from gmmap.mapping.planner import GradientPlanner, OccupancyField, PlannerOptions, plan
+from gmmap.mapping.planner import GradientPlanner, OccupancyField, PlannerOptions, Route, plan
 
 RADIUS = PlannerOptions().robot_radius
 
@@ -76,6 +76,36 @@ def test_an_unreachable_goal_ends_stuck_not_in_a_loop():
     assert r.status == "stuck" and not r.success and r.reason
     assert r.steps < options.max_steps
     assert distance_to_segments(r.path, box) > RADIUS
+
+
+def follow(route: Route, field: OccupancyField, start) -> tuple[bool, np.ndarray]:
+    """An explorer's steps along ``route`` on ``field``: whether it arrived, and the path."""
+    options, position = PlannerOptions(), np.array(start, dtype=float)
+    path = [position]
+    while (target := route.next_waypoint(position)) is not None:
+        direction = route.steer(position, target, options, field)
+        if direction is None:
+            return False, np.array(path)
+        position = position + min(options.step, np.linalg.norm(target - position)) * direction
+        path.append(position)
+    return True, np.array(path)
+
+
+@pytest.mark.parametrize(("pocket", "first_into"), [(1.0, True), (-1.0, False)])
+def test_a_route_round_the_closed_side_of_a_wall_turns_back_round_the_open_side(pocket, first_into):
+    """A wall across the way, open 1 m to one side and closed into a pocket on the other
+    (a door jamb beside a wall): whichever side the route takes first, it arrives; where it
+    took the pocket (to the left, from the wall's middle), it turned back once."""
+    walls = [(3.0, -pocket, 3.0, 3.0 * pocket), (1.5, 3.0 * pocket, 3.0, 3.0 * pocket)]
+    goal = np.array([6.0, 0.0])
+    route = Route(goal[None], goal, 0.0)
+    arrived, path = follow(route, OccupancyField(segment_gmm(walls), PlannerOptions()), (0, 0))
+    assert arrived and distance_to_segments(path, walls) > RADIUS
+    assert route.turned_back == first_into == ((path[:, 1] * pocket).max() > 1.5)
+    # Without the second side, the route that went into the pocket gives up.
+    again = Route(goal[None], goal, 0.0, turned_back=True)
+    field = OccupancyField(segment_gmm(walls), PlannerOptions())
+    assert follow(again, field, (0, 0))[0] != first_into
 
 
 def test_analytic_gradient_matches_finite_differences():
