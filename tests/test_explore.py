@@ -28,6 +28,7 @@ from gmmap.mapping.frontier import (
     decode_horizons,
     encode_horizons,
     horizon_from,
+    preferred,
 )
 from gmmap.mapping.planner import OccupancyField
 from gmmap.math.gmm import Gmm
@@ -198,9 +199,8 @@ def test_a_blocked_target_moves_back_along_its_line_only_as_far_as_clears_it():
     assert far_target((7.0, 7.7)) == pytest.approx(6.6, abs=0.05)  # back 1 m, not a quarter
 
 
-def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
-    """Goals the planner gave up on come last, are tried again once no other is left, and
-    are left for good after ``TRIES``; a goal the robot stands on is left at once."""
+def corridor_explorer() -> tuple[Explorer, OccupancyField]:
+    """A robot in the middle of a corridor it saw 7.6 m down either way, and its walls."""
     angle = (np.arange(72) + 0.5) * 2 * np.pi / 72
     explorer = Explorer("robot_0", config("corridor", 1))
     explorer.recorder.closed = [
@@ -211,7 +211,13 @@ def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
         [np.c_[along, np.full_like(along, y), np.full_like(along, 0.5)] for y in (-0.8, 0.8)]
     )
     seen = Gmm(np.full(len(pts), 1 / len(pts)), pts, np.tile(np.eye(3) * 0.05**2, (len(pts), 1, 1)))
-    live = OccupancyField(seen, explorer.planner_options)
+    return explorer, OccupancyField(seen, explorer.planner_options)
+
+
+def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
+    """Goals the planner gave up on come last, are tried again once no other is left, and
+    are left for good after ``TRIES``; a goal the robot stands on is left at once."""
+    explorer, live = corridor_explorer()
 
     def goal(failed: list, at=(0.0, 0.0)):
         explorer.failed, explorer.route = list(failed), None
@@ -228,6 +234,31 @@ def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
     # Standing on one end while it stays a frontier: the other, then nothing.
     np.testing.assert_allclose(goal([], at=east), west)
     assert len(explorer.failed) == TRIES and goal(explorer.failed + [west] * TRIES) is None
+
+
+def test_a_robot_takes_what_peers_leave_it_and_keeps_its_goal_whatever_its_kind(monkeypatch):
+    """The one frontier with unknown space behind it is a nearer peer's goal: the robot takes
+    the other rather than wait. Once the peer has gone, it keeps that goal, though it is not
+    the kind it would choose first."""
+    explorer, live = corridor_explorer()
+    frontiers = FreeSpace.frontiers
+
+    def east_open(space, blocked):
+        return [replace(f, open=f.size * (f.goal[0] > 0)) for f in frontiers(space, blocked)]
+
+    monkeypatch.setattr(FreeSpace, "frontiers", east_open)
+    explorer._choose(0.0, live)
+    east = explorer.route.goal
+    assert east[0] > 7.0
+    peers = [(east - [1.0, 0.0], east)]
+    monkeypatch.setattr(explorer, "_joined_peers", lambda: peers)
+    explorer.route = None
+    explorer._choose(0.0, live)
+    assert explorer.status == "exploring" and explorer.route.goal[0] < -7.0
+    peers.clear()
+    explorer._choose(4.0, live)
+    assert explorer.route.goal[0] < -7.0
+    assert preferred(explorer.space().frontiers(explorer._blocked(live)), 3, None)[0].goal[0] > 7
 
 
 def test_explore_options_are_checked():

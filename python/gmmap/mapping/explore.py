@@ -38,6 +38,7 @@ from gmmap.mapping.frontier import (
     HorizonRecorder,
     clear_lines,
     encode_horizons,
+    preferred,
     unit,
 )
 from gmmap.mapping.mapper import Mapper
@@ -326,14 +327,6 @@ class Explorer:
         self.failed += here * TRIES
         tries = [sum(np.linalg.norm(f.goal - g) < 0.75 for g in self.failed) for f in fronts]
         fronts = [f for f, n in zip(fronts, tries, strict=True) if n == min(tries) < TRIES]
-        # Small frontiers only once no large one is left: the far end of a corridor seen
-        # lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %).
-        # Open ones first: a sliver between two horizons against a mapped wall hides nothing.
-        fronts = (
-            [f for f in fronts if f.open >= o.min_frontier]
-            or [f for f in fronts if f.size >= o.min_frontier]
-            or fronts
-        )
         if not fronts:
             self._stop("done: no frontier left that it can reach")
             return
@@ -342,6 +335,8 @@ class Explorer:
         if not fronts:  # following a peer, it would arrive after it and find nothing left
             self._stop("waiting: the frontiers left are nearer peers' goals")
             return
+        # Kinds of frontier after peers' goals: a robot waited while the team had one open one.
+        fronts = preferred(fronts, o.min_frontier, None if self.route is None else self.route.goal)
         dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.
