@@ -238,8 +238,8 @@ def test_a_given_up_goal_comes_back_once_nothing_else_is_left():
 
 def test_a_robot_takes_what_peers_leave_it_and_keeps_its_goal_whatever_its_kind(monkeypatch):
     """The one frontier with unknown space behind it is a nearer peer's goal: the robot takes
-    the other rather than wait. Once the peer has gone, it keeps that goal, though it is not
-    the kind it would choose first."""
+    the other rather than wait. Once the peer's goal has gone, it keeps that goal, though it
+    is not the kind it would choose first; alone, it would not."""
     explorer, live = corridor_explorer()
     frontiers = FreeSpace.frontiers
 
@@ -255,9 +255,13 @@ def test_a_robot_takes_what_peers_leave_it_and_keeps_its_goal_whatever_its_kind(
     explorer.route = None
     explorer._choose(0.0, live)
     assert explorer.status == "exploring" and explorer.route.goal[0] < -7.0
-    peers.clear()
+    peers[0] = (east - [1.0, 0.0], None)  # the peer's goal is gone
     explorer._choose(4.0, live)
     assert explorer.route.goal[0] < -7.0
+    # A lone robot drops a goal of a lesser kind: what it sees itself changes kinds.
+    peers.clear()
+    explorer._choose(8.0, live)
+    assert explorer.route.goal[0] > 7.0
     assert preferred(explorer.space().frontiers(explorer._blocked(live)), 3, None)[0].goal[0] > 7
 
 

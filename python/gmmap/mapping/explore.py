@@ -335,8 +335,10 @@ class Explorer:
         if not fronts:  # following a peer, it would arrive after it and find nothing left
             self._stop("waiting: the frontiers left are nearer peers' goals")
             return
-        # Kinds of frontier after peers' goals: a robot waited while the team had one open one.
-        fronts = preferred(fronts, o.min_frontier, None if self.route is None else self.route.goal)
+        # Kinds after peers' goals (a robot waited while the team had one open frontier); its
+        # goal kept whatever its kind only among peers, whose submaps and claims change kinds.
+        heading = None if self.route is None or not peers else self.route.goal
+        fronts = preferred(fronts, o.min_frontier, heading)
         dist, pred, start = self._distances(space, k, live)
         # Through the cheapest viewpoint whose horizon holds the goal, not only the one that
         # found it: that one may lie far back, round a corner the robot has since turned.

@@ -325,8 +325,11 @@ def preferred(fronts: list[Frontier], min_size: int, heading: np.ndarray | None)
     large ones, else all. Small ones only once no large one is left: the far end of a corridor
     seen lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %);
     open ones first: a sliver between two horizons against a mapped wall hides nothing. The
-    one within 1 m of ``heading`` (the goal a robot heads for) stays whatever its kind: that
-    changes as peers' submaps arrive, and robots went back and forth across a hall."""
+    one within 1 m of ``heading`` (the goal a robot heads for) stays whatever its kind: kinds
+    change as peers' submaps arrive and peers' goals come and go, and robots went back and
+    forth across a hall (random-office:102). A lone robot passes None: a frontier that lost
+    its open points as it came nearer hides little (random-office:101 alone took 159.8 s to
+    90 % keeping such goals, 98.8 s dropping them)."""
     tier = (
         [f for f in fronts if f.open >= min_size]
         or [f for f in fronts if f.size >= min_size]
