@@ -33,6 +33,7 @@ from gmmap.config import Config
 from gmmap.mapping.frame import Frame
 from gmmap.mapping.frontier import (
     BACK,
+    SAME_GOAL,
     FreeSpace,
     Horizon,
     HorizonRecorder,
@@ -384,7 +385,7 @@ class Explorer:
             return None
         gaps = [float(np.linalg.norm(f.goal - self.route.goal)) for f in fronts]
         i = int(np.argmin(gaps))
-        return i if gaps[i] < 1.0 and math.isfinite(costs[i]) else None
+        return i if gaps[i] < SAME_GOAL and math.isfinite(costs[i]) else None
 
     def _distances(
         self, space: FreeSpace, k: Knowledge, live: OccupancyField | None

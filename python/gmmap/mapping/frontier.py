@@ -41,6 +41,7 @@ MAX_CODE = 255
 BACK = 0.4  # metres a frontier's target lies inside the horizon that sees it
 SEEN_MARGIN = 0.2  # metres inside a horizon a surface must lie to contradict it
 MAX_INVENTED = 0.3  # metres along one direction a view joining a horizon may invent
+SAME_GOAL = 1.0  # metres within which a frontier's goal is the one a route heads for
 BEHIND = (0.5, 1.0, 1.5)  # metres past a frontier point looked at for unknown space
 Blocked = Callable[[np.ndarray], np.ndarray]  # (N, 2) → bool (N,): occupied per the map
 
@@ -325,9 +326,9 @@ def preferred(fronts: list[Frontier], min_size: int, heading: np.ndarray | None)
     large ones, else all. Small ones only once no large one is left: the far end of a corridor
     seen lengthwise is a few probes wide (random-office:101: one robot said "done" at 70 %);
     open ones first: a sliver between two horizons against a mapped wall hides nothing. The
-    one within 1 m of ``heading`` (the goal a robot heads for) stays whatever its kind: kinds
-    change as peers' submaps arrive and peers' goals come and go, and robots went back and
-    forth across a hall (random-office:102). A lone robot passes None: a frontier that lost
+    one within ``SAME_GOAL`` of ``heading`` (the goal a robot heads for) stays whatever its
+    kind: kinds change as peers' submaps arrive and peers' goals come and go, and robots went
+    back and forth across a hall (random-office:102). A lone robot passes None: a frontier that lost
     its open points as it came nearer hides little (random-office:101 alone took 159.8 s to
     90 % keeping such goals, 98.8 s dropping them)."""
     tier = (
@@ -337,7 +338,7 @@ def preferred(fronts: list[Frontier], min_size: int, heading: np.ndarray | None)
     )
     if heading is None:
         return tier
-    near = [f for f in fronts if np.linalg.norm(f.goal - heading) < 1.0]
+    near = [f for f in fronts if np.linalg.norm(f.goal - heading) < SAME_GOAL]
     return tier + [f for f in near if all(f is not t for t in tier)]
 
 
