@@ -5,6 +5,7 @@ import pytest
 
 import gmmap
 from gmmap import Gmm, InvalidInputError, fit_gmm, register
+from gmmap.math.geometry import pose_distance
 from gmmap.math.register import confidence
 
 
@@ -80,6 +81,34 @@ def test_the_returned_basin_is_the_better_refined_one():
     source, target = (Gmm.load(data / f"basin_{k}.npz") for k in ("source", "target"))
     r = register(source, target)
     assert r.confidence > 0.3 and r.alternative_confidence < r.confidence
+
+
+def test_level_planes_do_not_rank_the_solutions():
+    """Two simulated 16-beam LiDAR submaps of the office (tests/data/level_*: seed 0, robots 0
+    and 2, turned half round and 3.9 m apart). Over the whole mixtures a wrong solution lays
+    more floor on floor and wins; ranked on the upright parts, the right one does, reports
+    its C on the whole mixtures and keeps the floor's solution as a lower basin."""
+    data = Path(__file__).parent / "data"
+    source, target = (Gmm.load(data / f"level_{k}.npz") for k in ("source", "target"))
+    truth = np.loadtxt(data / "level_truth.txt")
+    whole = register(source, target, level_planes=True)
+    assert pose_distance(whole.transform, truth)[0] > 1.0
+    r = register(source, target)
+    t, angle = pose_distance(r.transform, truth)
+    assert t < 0.2 and angle < 3.0
+    assert r.confidence == pytest.approx(confidence(source, target, r.transform), abs=0.02)
+    floor = [c for T, c in r.basins[1:] if pose_distance(T, whole.transform)[0] < 0.5]
+    assert floor and floor[0] < r.confidence and r.alternative_confidence < r.confidence
+
+
+def test_a_floor_alone_is_searched_whole():
+    """With fewer than three components left once level planes are set aside, the search runs
+    on the whole mixtures as before."""
+    flat = np.diag([1.0, 1.0, 1e-4])
+    floor = Gmm(np.full(4, 0.25), [[0, 0, 0], [2, 0, 0], [0, 2, 0], [2, 2, 0]], [flat] * 4)
+    r = register(floor, floor)
+    assert r.confidence == pytest.approx(1.0, abs=0.01)
+    assert r.confidence == register(floor, floor, level_planes=True).confidence
 
 
 def test_confidence_does_not_depend_on_component_count(slice_points):

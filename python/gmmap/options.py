@@ -155,6 +155,9 @@ class RegisterOptions:
 
     A global search starts from the best maxima of translation votes over ``yaw_starts`` yaws
     (`gmmap.math.register`): two submaps that overlap in part align far from their centroids.
+    ``level_planes`` false: it also searches without the level planes (floor, ceiling, table
+    tops) and ranks its solutions by what is left, since those planes line up under any yaw
+    and horizontal shift (`gmmap.math.register`).
     """
 
     #: From a guess: std devs (m) added to every covariance, coarse to fine
@@ -169,6 +172,7 @@ class RegisterOptions:
     search_cell: float = 0.5  #: Global search: spacing and blur (m) of its translation votes
     search_starts: int = 24  #: Global search: the votes' best maxima optimised at the coarse scale
     refine_starts: int = 2  #: Global search: distinct coarse solutions refined to the finest scale
+    level_planes: bool = False  #: Global search: rank solutions with floors and ceilings too
     dof: int = 6  #: Degrees of freedom: 6, or 4 (x, y, z and yaw only: ground robots)
     information_scale: float | None = None  #: Measurements counted; null: smaller component count
     confidence_scale: float = 0.05  #: σ (m) added to every covariance to measure the confidence C

@@ -18,6 +18,19 @@ are optimised at the coarsest scale (`gmmap_core::search`; near ``yaw_hint``, or
 ``search_cell`` 0, the yaws start with the centroids aligned instead). The best
 ``refine_starts`` distinct coarse solutions are refined; every distinct one comes back in
 ``basins``, the best first (the next one's C is the ``alternative_confidence``).
+
+Level planes (floors, ceilings, table tops: flat components facing up or down) line up under
+any yaw and horizontal shift, so over the whole mixtures a wrong alignment that lays more
+floor on floor outscores the right one: two simulated office submaps 4-8 m apart along a
+corridor align best shifted or turned 180°. Without ``init`` (and unless
+``level_planes``), the search runs twice, on the whole mixtures and on their upright parts
+(the rest), every solution is refined on the whole mixtures, and the solutions are ranked by
+C on the upright parts. The best one reports its C on the whole mixtures; the others, in
+``basins`` and ``alternative_confidence``, their upright C relative to its. On the simulated
+office's overlapping pairs (`benchmarks/sensors.py`, seed 0) the best solution is right for 71
+of 120 16-beam LiDAR pairs instead of 62, for 158 of 274 360° LiDAR (2 Hz) pairs instead of
+100, and for 17 of 44 depth-camera chains instead of 8; TUM fr1_xyz's cross-session pairs stay
+12 of 12. Both searches cost about 1.8 times one.
 """
 
 from __future__ import annotations
@@ -30,12 +43,18 @@ import numpy as np
 
 from gmmap import _core
 from gmmap.errors import InvalidInputError
+from gmmap.math.geometry import pose_distance
 from gmmap.math.gmm import Gmm, _rigid
 from gmmap.options import RegisterOptions
 
 # Scales from this standard deviation (m) up are registered on coarsened mixtures from a guess
 # (`RegisterOptions.coarse_cell`; at 5 cm the merge saves nothing more).
 COARSE_SCALE = 0.1
+# A level plane: its least variance under FLAT_RATIO of the middle one, its normal within
+# LEVEL_TILT_DEG of +z. A search keeps at least MIN_UPRIGHT components.
+FLAT_RATIO = 0.1
+LEVEL_TILT_DEG = 25.0
+MIN_UPRIGHT = 3
 
 
 @dataclass(frozen=True)
@@ -105,6 +124,33 @@ def register(
         raise InvalidInputError("scales must be finite and >= 0")
     if yaw_hint is not None and not np.isfinite(yaw_hint):
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
+    if init is not None or o.level_planes:
+        return _solve(source, target, init, yaw_hint, scales, o)
+    upright = _without_level_planes(source), _without_level_planes(target)
+    if upright[0] is None or upright[1] is None:
+        return _solve(source, target, None, yaw_hint, scales, o)
+    start = time.perf_counter()
+    # The whole mixtures find some places the upright parts miss (a desk seen from above: its
+    # top's edges); both searches' solutions are refined on the whole mixtures.
+    found = [_solve(*pair, None, yaw_hint, scales, o) for pair in ((source, target), upright)]
+    starts = [T for r in found for T, _ in r.basins or ((r.transform, 0.0),)]
+    results = [_solve(source, target, T, None, scales[-2:], o) for T in starts]
+    return replace(
+        _ranked_upright(upright, results, o),
+        iterations=sum(r.iterations for r in found + results),
+        time_s=time.perf_counter() - start,
+    )
+
+
+def _solve(
+    source: Gmm,
+    target: Gmm,
+    init: np.ndarray | None,
+    yaw_hint: float | None,
+    scales: tuple[float, ...],
+    o: RegisterOptions,
+) -> Registration:
+    """The Rust core's registration (`register` after its checks)."""
     scale = float(o.information_scale or min(len(source), len(target)))
     start = time.perf_counter()
     T, confidence, info, iterations, alternative, basins = _core.register_gmm(
@@ -131,6 +177,47 @@ def register(
     return Registration(
         T, float(confidence), info, int(iterations), elapsed, float(alternative), basins
     )
+
+
+def _without_level_planes(gmm: Gmm) -> Gmm | None:
+    """``gmm`` without its level planes (flat components whose normal is within
+    `LEVEL_TILT_DEG` of +z: floor, ceiling, table tops), reweighted; None when fewer than
+    `MIN_UPRIGHT` components would be left."""
+    values, vectors = np.linalg.eigh(gmm.covariances)
+    flat = values[:, 0] < FLAT_RATIO * values[:, 1]
+    level = flat & (np.abs(vectors[:, 2, 0]) > np.cos(np.radians(LEVEL_TILT_DEG)))
+    if np.count_nonzero(~level) < MIN_UPRIGHT:
+        return None
+    weights = gmm.weights[~level]
+    return Gmm(weights / weights.sum(), gmm.means[~level], gmm.covariances[~level])
+
+
+def _ranked_upright(
+    upright: tuple[Gmm, Gmm], results: list[Registration], o: RegisterOptions
+) -> Registration:
+    """The best of ``results`` by C on the ``upright`` parts of the mixtures, with its own C on
+    the whole ones; the other distinct ones (30° or 0.5 m apart, as the core tells basins) in
+    ``basins`` and ``alternative_confidence``, at their upright C relative to its."""
+    scored = sorted(
+        ((confidence(*upright, r.transform, o.confidence_scale), r) for r in results),
+        key=lambda cr: -cr[0],
+    )
+    distinct: list[tuple[float, Registration]] = []
+    for c, r in scored:
+        if all(_apart(r.transform, d.transform) for _, d in distinct):
+            distinct.append((c, r))
+    top, best = distinct[0]
+    scale = best.confidence / top if top > 0 else 0.0
+    return replace(
+        best,
+        alternative_confidence=distinct[1][0] * scale if len(distinct) > 1 else 0.0,
+        basins=tuple((r.transform, c * scale) for c, r in distinct),
+    )
+
+
+def _apart(a: np.ndarray, b: np.ndarray) -> bool:
+    t, angle = pose_distance(a, b)
+    return t > 0.5 or angle > 30.0
 
 
 def confidence(
