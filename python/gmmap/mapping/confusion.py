@@ -7,7 +7,9 @@ from a wrong one there. Each robot can measure that chance level itself: its own
 odometry puts them apart (they do not coincide where odometry places them) are places it knows
 to be different, so the best C a submap reaches against those, with no initial guess, is what C
 a wrong match of it reaches. `confusion` is that level; `gmmap.mapping.mapper.Mapper` refuses a
-match whose C is not clearly above it on either side (`PlaceOptions.max_confusion`).
+match whose C is not clearly above it on either side (`PlaceOptions.max_confusion`). Both are
+taken on the mixtures' upright parts (`Registration.upright_confidence`), where level planes,
+alike under any shift, do not count.
 
 A lookalike is a wrong match the verification would still take only where it fills no free space
 either submap's robot saw: where submaps carry horizons, `confusion` also gives the level over
@@ -74,8 +76,9 @@ def confusion(
         if confidence(gmm(key), gmm(own[i]), odometry) >= APART:
             continue
         reg = db.register_pair(gmm(key), gmm(own[i]))
-        level = max(level, reg.confidence)
-        possible = max(possible, reg.confidence if plausible is None else plausible(own[i], reg))
+        c = reg.confidence if reg.upright_confidence is None else reg.upright_confidence
+        level = max(level, c)
+        possible = max(possible, c if plausible is None else plausible(own[i], reg))
         tried += 1
         if tried == probes:
             break

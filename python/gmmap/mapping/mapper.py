@@ -217,12 +217,15 @@ class Mapper:
         )
 
     def _plausible(self, query: Submap, key: Node, reg: Registration) -> float:
-        """The confidence of ``reg``'s best basin that fills no seen free space (`_free_basins`;
-        every basin where unknown), 0 where none is left: a lookalike verification could take."""
+        """The upright confidence of ``reg``'s best basin that fills no seen free space
+        (`_free_basins`; every basin where unknown), 0 where none is left: a lookalike
+        verification could take."""
+        upright = _upright(reg)
         free = self._free_basins(query, key, reg)
         if free is None:
-            return reg.confidence
-        return free[0][1] if free else 0.0
+            return upright
+        # Basins hold their upright C relative to the best one's C (`gmmap.math.register`).
+        return free[0][1] * upright / reg.confidence if free and reg.confidence > 0 else 0.0
 
     def _free_view(self, key: Node) -> tuple[list[Horizon], np.ndarray, tuple, float] | None:
         """The free space held submap ``key``'s robot saw, over its chain (`_members`): the
@@ -276,11 +279,11 @@ class Mapper:
         """``m`` refused unless its confidence is clearly above (``max_confusion``) what either
         submap reaches against places its own robot knows are elsewhere, as verification would
         take them, and above (``max_any_confusion``) any alignment there at all
-        (`gmmap.mapping.confusion`)."""
+        (`gmmap.mapping.confusion`); all on the upright parts, as a search ranks solutions."""
         options = self.config.place
         mine = self._confusion(m.query)
         theirs = self._confusion((m.candidate.robot, m.candidate.seq))
-        c = m.registration.confidence
+        c = _upright(m.registration)
         plausible = max(mine.plausible, theirs.plausible) / c if c > 0 else 0.0
         every = max(mine.level, theirs.level) / c if c > 0 else 0.0
         accepted = plausible < options.max_confusion and every < options.max_any_confusion
@@ -467,3 +470,8 @@ class Mapper:
             },
             "backend_time_s": b.time_s,
         }
+
+
+def _upright(reg: Registration) -> float:
+    """``reg``'s C on the mixtures' upright parts, its C where not measured."""
+    return reg.confidence if reg.upright_confidence is None else reg.upright_confidence

@@ -208,7 +208,8 @@ def distinct(
 
 def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOptions) -> float:
     """The confidence of ``match``'s alignment turned half round about +z through the query's
-    centre and refined from there, relative to ``match``'s own; 0 when the refinement falls
+    centre and refined from there, relative to ``match``'s own, both on the upright parts
+    (`Registration.upright_confidence`: a floor lines up both ways); 0 when the refinement falls
     back into ``match``'s basin (within 0.5 m and 30°, as the global search tells basins).
 
     A corridor seen end for end, or a room with two like halves, lines up both ways. The
@@ -216,12 +217,14 @@ def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOpt
     misses that twin; probing it directly does not. Close to 1, or above: the place is
     symmetric and this match cannot tell which way round it is.
     """
-    if match.confidence <= 0:
+    own = match.upright_confidence
+    own = match.confidence if own is None else own
+    if own <= 0:
         return 0.0
     T = match.transform
     twin = register(query, candidate, half_turned(query, T), options=options)
     t, angle = pose_distance(twin.transform, T)
-    return twin.confidence / match.confidence if t > 0.5 or angle > 30 else 0.0
+    return (twin.upright_confidence or 0.0) / own if t > 0.5 or angle > 30 else 0.0
 
 
 def half_turned(query: Gmm, transform: np.ndarray) -> np.ndarray:

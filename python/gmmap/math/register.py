@@ -77,6 +77,9 @@ class Registration:
     # Without ``init``: every distinct solution found, (transform, confidence), best first
     # (this one leads); with ``init`` just this one.
     basins: tuple[tuple[np.ndarray, float], ...] = ()
+    # C on the mixtures' upright parts (without level planes), where whether one alignment
+    # beats another is told; ``confidence`` where ``level_planes`` or too few are upright.
+    upright_confidence: float | None = None
 
     @property
     def conditioning(self) -> float:
@@ -124,11 +127,14 @@ def register(
         raise InvalidInputError("scales must be finite and >= 0")
     if yaw_hint is not None and not np.isfinite(yaw_hint):
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
-    if init is not None or o.level_planes:
-        return _solve(source, target, init, yaw_hint, scales, o)
     upright = _without_level_planes(source), _without_level_planes(target)
-    if upright[0] is None or upright[1] is None:
-        return _solve(source, target, None, yaw_hint, scales, o)
+    if o.level_planes or upright[0] is None or upright[1] is None:
+        r = _solve(source, target, init, yaw_hint, scales, o)
+        return replace(r, upright_confidence=r.confidence)
+    if init is not None:
+        r = _solve(source, target, init, yaw_hint, scales, o)
+        c = confidence(*upright, r.transform, o.confidence_scale)
+        return replace(r, upright_confidence=c)
     start = time.perf_counter()
     # The whole mixtures find some places the upright parts miss (a desk seen from above: its
     # top's edges); both searches' solutions are refined on the whole mixtures.
@@ -210,9 +216,24 @@ def _ranked_upright(
     scale = best.confidence / top if top > 0 else 0.0
     return replace(
         best,
+        upright_confidence=top,
         alternative_confidence=distinct[1][0] * scale if len(distinct) > 1 else 0.0,
         basins=tuple((r.transform, c * scale) for c, r in distinct),
     )
+
+
+def upright_confidence(
+    source: Gmm,
+    target: Gmm,
+    transform: np.ndarray | None = None,
+    scale: float = RegisterOptions.confidence_scale,
+) -> float:
+    """The `confidence` of ``transform`` on the mixtures' upright parts (without their level
+    planes), on the whole mixtures where too few components are upright."""
+    upright = _without_level_planes(source), _without_level_planes(target)
+    if upright[0] is None or upright[1] is None:
+        return confidence(source, target, transform, scale)
+    return confidence(*upright, transform, scale)
 
 
 def _apart(a: np.ndarray, b: np.ndarray) -> bool:
