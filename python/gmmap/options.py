@@ -172,7 +172,7 @@ class RegisterOptions:
     search_cell: float = 0.5  #: Global search: spacing and blur (m) of its translation votes
     search_starts: int = 24  #: Global search: the votes' best maxima optimised at the coarse scale
     refine_starts: int = 2  #: Global search: distinct coarse solutions refined to the finest scale
-    level_planes: bool = False  #: Global search: rank solutions with floors and ceilings too
+    level_planes: bool = False  #: Let floors and ceilings rank global solutions and lookalikes
     dof: int = 6  #: Degrees of freedom: 6, or 4 (x, y, z and yaw only: ground robots)
     information_scale: float | None = None  #: Measurements counted; null: smaller component count
     confidence_scale: float = 0.05  #: σ (m) added to every covariance to measure the confidence C

@@ -76,9 +76,8 @@ def confusion(
         if confidence(gmm(key), gmm(own[i]), odometry) >= APART:
             continue
         reg = db.register_pair(gmm(key), gmm(own[i]))
-        c = reg.confidence if reg.upright_confidence is None else reg.upright_confidence
-        level = max(level, c)
-        possible = max(possible, c if plausible is None else plausible(own[i], reg))
+        level = max(level, reg.upright)
+        possible = max(possible, reg.upright if plausible is None else plausible(own[i], reg))
         tried += 1
         if tried == probes:
             break

@@ -220,7 +220,7 @@ class Mapper:
         """The upright confidence of ``reg``'s best basin that fills no seen free space
         (`_free_basins`; every basin where unknown), 0 where none is left: a lookalike
         verification could take."""
-        upright = _upright(reg)
+        upright = reg.upright
         free = self._free_basins(query, key, reg)
         if free is None:
             return upright
@@ -283,7 +283,7 @@ class Mapper:
         options = self.config.place
         mine = self._confusion(m.query)
         theirs = self._confusion((m.candidate.robot, m.candidate.seq))
-        c = _upright(m.registration)
+        c = m.registration.upright
         plausible = max(mine.plausible, theirs.plausible) / c if c > 0 else 0.0
         every = max(mine.level, theirs.level) / c if c > 0 else 0.0
         accepted = plausible < options.max_confusion and every < options.max_any_confusion
@@ -470,8 +470,3 @@ class Mapper:
             },
             "backend_time_s": b.time_s,
         }
-
-
-def _upright(reg: Registration) -> float:
-    """``reg``'s C on the mixtures' upright parts, its C where not measured."""
-    return reg.confidence if reg.upright_confidence is None else reg.upright_confidence

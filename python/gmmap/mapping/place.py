@@ -217,14 +217,13 @@ def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOpt
     misses that twin; probing it directly does not. Close to 1, or above: the place is
     symmetric and this match cannot tell which way round it is.
     """
-    own = match.upright_confidence
-    own = match.confidence if own is None else own
+    own = match.upright
     if own <= 0:
         return 0.0
     T = match.transform
     twin = register(query, candidate, half_turned(query, T), options=options)
     t, angle = pose_distance(twin.transform, T)
-    return (twin.upright_confidence or 0.0) / own if t > 0.5 or angle > 30 else 0.0
+    return twin.upright / own if t > 0.5 or angle > 30 else 0.0
 
 
 def half_turned(query: Gmm, transform: np.ndarray) -> np.ndarray:

@@ -30,7 +30,9 @@ C on the upright parts. The best one reports its C on the whole mixtures; the ot
 office's overlapping pairs (`benchmarks/sensors.py`, seed 0) the best solution is right for 71
 of 120 16-beam LiDAR pairs instead of 62, for 158 of 274 360° LiDAR (2 Hz) pairs instead of
 100, and for 17 of 44 depth-camera chains instead of 8; TUM fr1_xyz's cross-session pairs stay
-12 of 12. Both searches cost about 1.8 times one.
+12 of 12. Both searches cost about 1.8 times one. Every registration also reports its C on
+the upright parts (`Registration.upright_confidence`), in which verification compares a match
+with its lookalikes and its half-turned twin.
 """
 
 from __future__ import annotations
@@ -80,6 +82,11 @@ class Registration:
     # C on the mixtures' upright parts (without level planes), where whether one alignment
     # beats another is told; ``confidence`` where ``level_planes`` or too few are upright.
     upright_confidence: float | None = None
+
+    @property
+    def upright(self) -> float:
+        """``upright_confidence``, or ``confidence`` where it was not measured."""
+        return self.confidence if self.upright_confidence is None else self.upright_confidence
 
     @property
     def conditioning(self) -> float:
@@ -220,20 +227,6 @@ def _ranked_upright(
         alternative_confidence=distinct[1][0] * scale if len(distinct) > 1 else 0.0,
         basins=tuple((r.transform, c * scale) for c, r in distinct),
     )
-
-
-def upright_confidence(
-    source: Gmm,
-    target: Gmm,
-    transform: np.ndarray | None = None,
-    scale: float = RegisterOptions.confidence_scale,
-) -> float:
-    """The `confidence` of ``transform`` on the mixtures' upright parts (without their level
-    planes), on the whole mixtures where too few components are upright."""
-    upright = _without_level_planes(source), _without_level_planes(target)
-    if upright[0] is None or upright[1] is None:
-        return confidence(source, target, transform, scale)
-    return confidence(*upright, transform, scale)
 
 
 def _apart(a: np.ndarray, b: np.ndarray) -> bool:
