@@ -177,8 +177,9 @@ class Match:
 def distinct(
     matches: Sequence[Match], anchors: Mapping[tuple[str, int], np.ndarray], options: PlaceOptions
 ) -> list[Match]:
-    """``matches`` (one query's, all its candidates) with each one's `Match.conflict`, accepted
-    only while that stays ≤ ``options.max_conflict``.
+    """``matches`` (one query's, all its candidates) with each one's `Match.conflict` (the best
+    competitor's upright C over its own, `Registration.upright`), accepted only while that
+    stays ≤ ``options.max_conflict``.
 
     Two candidates in one robot's map that both take the query, at places more than
     ``conflict_distance`` m or ``conflict_angle`` degrees apart, cannot both be right: the
@@ -199,8 +200,9 @@ def distinct(
                 continue
             t, angle = pose_distance(placed[i], placed[j])
             if t > options.conflict_distance or angle > options.conflict_angle:
-                best = max(best, o.registration.confidence)
-        conflict = best / m.registration.confidence if m.registration.confidence > 0 else 0.0
+                best = max(best, o.registration.upright)
+        own = m.registration.upright
+        conflict = best / own if own > 0 else 0.0
         accepted = m.accepted and conflict <= options.max_conflict
         out.append(replace(m, accepted=accepted, conflict=conflict))
     return out
