@@ -97,6 +97,7 @@ def test_level_planes_do_not_rank_the_solutions():
     t, angle = pose_distance(r.transform, truth)
     assert t < 0.2 and angle < 3.0
     assert r.confidence == pytest.approx(confidence(source, target, r.transform), abs=0.02)
+    assert type(r.upright_confidence) is float  # a numpy scalar breaks the reports' JSON
     floor = [c for T, c in r.basins[1:] if pose_distance(T, whole.transform)[0] < 0.5]
     assert floor and floor[0] < r.confidence and r.alternative_confidence < r.confidence
 

@@ -246,4 +246,4 @@ def confidence(
     f = Gmm(source.weights, source.means, source.covariances + s2)
     g = Gmm(target.weights, target.means, target.covariances + s2)
     moved = f if transform is None else f.transform(transform)
-    return moved.l2_correlation(g)
+    return float(moved.l2_correlation(g))
