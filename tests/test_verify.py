@@ -213,7 +213,7 @@ def test_a_match_must_clear_plausible_lookalikes_by_a_margin_and_beat_all(
     mapper.hold(held)
     reg = register(held[0].gmm, held[1].gmm, np.eye(4))
     m = Match(("a", 0), Candidate("b", 0, 0.0), reg, accepted=True)
-    c = reg.confidence
+    c = reg.upright  # confusion is told on the upright parts
     mapper._confusions = {
         ("a", 0): Confusion(level * c, plausible * c),
         ("b", 0): Confusion(),
