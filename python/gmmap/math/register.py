@@ -134,8 +134,11 @@ def register(
         raise InvalidInputError("scales must be finite and >= 0")
     if yaw_hint is not None and not np.isfinite(yaw_hint):
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
+    if o.level_planes:
+        r = _solve(source, target, init, yaw_hint, scales, o)
+        return replace(r, upright_confidence=r.confidence)
     upright = _without_level_planes(source), _without_level_planes(target)
-    if o.level_planes or upright[0] is None or upright[1] is None:
+    if upright[0] is None or upright[1] is None:
         r = _solve(source, target, init, yaw_hint, scales, o)
         return replace(r, upright_confidence=r.confidence)
     if init is not None:
