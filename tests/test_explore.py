@@ -299,10 +299,15 @@ def test_coverage_counts_the_true_world_not_the_map():
 # ---- joining on what a peer saw through -----------------------------------------------------
 
 
-def walked(i: int, route: list, world: World) -> tuple[Explorer, list, np.ndarray]:
+def walked(
+    i: int, route: list, world: World, level_planes: bool = False
+) -> tuple[Explorer, list, np.ndarray]:
     """Robot i's `Explorer` after walking ``route`` (floor points) through ``world`` with the
-    tests' LiDAR, the submaps it shared, and its map frame in the world."""
-    explorer = Explorer(f"robot_{i}", config(world.name, 2))
+    tests' LiDAR, the submaps it shared, and its map frame in the world. ``level_planes``:
+    search on the whole mixtures only (`RegisterOptions.level_planes`)."""
+    base = config(world.name, 2)
+    base = replace(base, register=replace(base.register, level_planes=level_planes))
+    explorer = Explorer(f"robot_{i}", base)
     start = floor_pose(*route[0], np.pi / 2)
     sensor, shared, t = sim_sensor(explorer.config.sim), [], 0.0
     for a, b in zip(np.array(route[:-1]), np.array(route[1:]), strict=True):
@@ -315,19 +320,16 @@ def walked(i: int, route: list, world: World) -> tuple[Explorer, list, np.ndarra
     return explorer, [s for s in shared if s is not None], start
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ranked on the upright parts, the search no longer returns the flip for free space "
-    "to refuse; to be rewritten with register.level_planes",
-)
 def test_a_join_that_puts_walls_where_a_peer_saw_free_space_is_refused():
     """Two robots leave the hall of `two_rooms` for opposite rooms: each submap's hall and
-    room line up with the other's turned half round (a higher C than the right alignment),
-    and only the horizons tell: the flip puts walls where the other robot's rays went
-    through. The same pair at its true alignment puts none there."""
+    room line up with the other's turned half round (over the whole mixtures, floor included,
+    a higher C than the right alignment), and only the horizons tell: the flip puts walls
+    where the other robot's rays went through. The same pair at its true alignment puts none
+    there. The search ranks on the upright parts by default, where the flip does not win; it
+    is searched on the whole mixtures here so that free space has a flip to refuse."""
     world = two_rooms()
-    east, _, e_start = walked(0, [(6, 1.2), (6.2, 1.5), (7.8, 1.5), (9.3, 2.4)], world)
-    _, shared, w_start = walked(1, [(6, 2.0), (5.8, 2.5), (4.4, 3.0), (3.5, 3.0)], world)
+    east, _, e_start = walked(0, [(6, 1.2), (6.2, 1.5), (7.8, 1.5), (9.3, 2.4)], world, True)
+    _, shared, w_start = walked(1, [(6, 2.0), (5.8, 2.5), (4.4, 3.0), (3.5, 3.0)], world, True)
     for s in shared:
         east.receive(s)
     mapper = east.mapper
