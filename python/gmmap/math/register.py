@@ -25,8 +25,11 @@ floor on floor outscores the right one: two simulated office submaps 4-8 m apart
 corridor align best shifted or turned 180°. Without ``init`` (and unless
 ``level_planes``), the search runs twice, on the whole mixtures and on their upright parts
 (the rest), every solution is refined on the whole mixtures, and the solutions are ranked by
-C on the upright parts. The best one reports its C on the whole mixtures; the others, in
-``basins`` and ``alternative_confidence``, their upright C relative to its. On the simulated
+C on the upright parts. Both frames' +z is up (the search turns about it), so a solution
+tilted more than `MAX_TILT_DEG` is not ranked while any other is found: walls alone, with no
+ceiling, line up as well upside down. The best one reports its C on the whole mixtures; the
+others, in ``basins`` and ``alternative_confidence``, their upright C relative to its. On the
+simulated
 office's overlapping pairs (`benchmarks/sensors.py`, seed 0) the best solution is right for 71
 of 120 16-beam LiDAR pairs instead of 62, for 158 of 274 360° LiDAR (2 Hz) pairs instead of
 100, and for 17 of 44 depth-camera chains instead of 8; TUM fr1_xyz's cross-session pairs stay
@@ -57,6 +60,9 @@ COARSE_SCALE = 0.1
 FLAT_RATIO = 0.1
 LEVEL_TILT_DEG = 25.0
 MIN_UPRIGHT = 3
+# Both frames' +z is up within LEVEL_TILT_DEG: a solution tilting one onto the other by more
+# than twice that (walls laid on walls upside down) is not ranked.
+MAX_TILT_DEG = 2 * LEVEL_TILT_DEG
 
 
 @dataclass(frozen=True)
@@ -213,9 +219,11 @@ def _ranked_upright(
 ) -> Registration:
     """The best of ``results`` by C on the ``upright`` parts of the mixtures, with its own C on
     the whole ones; the other distinct ones (30° or 0.5 m apart, as the core tells basins) in
-    ``basins`` and ``alternative_confidence``, at their upright C relative to its."""
+    ``basins`` and ``alternative_confidence``, at their upright C relative to its. Solutions
+    tilted more than `MAX_TILT_DEG` are left out while any other is found."""
+    level = [r for r in results if r.transform[2, 2] >= np.cos(np.radians(MAX_TILT_DEG))]
     scored = sorted(
-        ((confidence(*upright, r.transform, o.confidence_scale), r) for r in results),
+        ((confidence(*upright, r.transform, o.confidence_scale), r) for r in level or results),
         key=lambda cr: -cr[0],
     )
     distinct: list[tuple[float, Registration]] = []
