@@ -229,18 +229,38 @@ def test_min_matches_holds_a_lone_match_back_until_a_consistent_one_arrives() ->
     assert result.accepted == [second, third] and result.rejected == {first: "pcm"}
     with pytest.raises(InvalidInputError, match="min_matches"):
         BackendOptions(min_matches=0)
+    with pytest.raises(InvalidInputError, match="min_submaps"):
+        BackendOptions(min_submaps=0)
 
 
 def test_weak_matches_need_more_agreement_than_strong_ones() -> None:
-    """The defaults: three consistent matches of confidence >= 0.75 join two maps, weaker ones
-    only four at a time."""
+    """With ``min_matches`` 4, three consistent matches of confidence >= 0.75 join two maps,
+    weaker ones only four at a time."""
     world = World({"a": 0, "b": 10}, seed=2, drift=LOW_DRIFT)
     for confidence, needed in ((0.8, 3), (0.6, 4)):
-        pg = world.graph(BackendOptions())
+        pg = world.graph(BackendOptions(min_matches=4))
         for k, i in enumerate((8, 12, 16, 20)):
             pg.add_match(*world.true_match("a", "b", i), INFO, confidence)
             joined = pg.optimize().groups == [["a", "b"]]
             assert joined == (k + 1 >= needed), (confidence, k)
+
+
+def test_matches_resting_on_one_submap_do_not_join() -> None:
+    """A query misplaced along a corridor matches the other robot's consecutive submaps there,
+    and those matches agree: three of them rest on one submap of its robot (under
+    ``min_submaps``). Three true matches of three places join."""
+    world = World({"a": 0, "b": 10}, seed=4, drift=LOW_DRIFT)
+    pg = world.graph(BackendOptions(min_matches=3))
+    for k in range(3):  # a's submap 8 registered where a is at submap 14
+        _, source, transform = world.true_match("a", "b", 14 + k)
+        shift = invert(world.G["a"][14]) @ world.G["a"][14 + k]
+        pg.add_match(("a", 8), source, shift @ transform, INFO)
+    result = pg.optimize()
+    assert result.groups == [["a"], ["b"]] and set(result.rejected.values()) == {"pending"}
+    pg = world.graph(BackendOptions(min_matches=3))
+    for i in (8, 14, 20):
+        pg.add_match(*world.true_match("a", "b", i), INFO)
+    assert pg.optimize().groups == [["a", "b"]]
 
 
 def test_a_consistent_minority_of_the_verified_matches_does_not_join() -> None:

@@ -360,15 +360,18 @@ class BackendOptions:
     pcm_exact_budget: int = 5_000  #: Branch-and-bound nodes of PCM's exact search, per robot pair
     # Two robots' maps join only once their mutually consistent matches hold min_matches
     # matches, or min_strong_matches of confidence >= strong_confidence (a match given without
-    # a confidence counts as strong); fewer are held back ("pending") until more arrive. One
-    # match is never enough by default: PCM cannot test it, and a corridor seen end for end
-    # scores as high as a true match (simulated depth cameras: C up to 0.87 at 2-12 m off);
-    # two consecutive submaps of robots passing a symmetric corridor in opposite directions
-    # even agree on one such flip. Weak matches (C 0.55-0.75: two sessions' submaps of one
-    # desk, partly overlapping) need more agreement than strong ones.
-    min_matches: int = 4  #: Consistent matches before two robots' maps join
+    # a confidence counts as strong), resting on at least min_submaps submaps of each robot;
+    # fewer are held back ("pending") until more arrive. One match is never enough by
+    # default: PCM cannot test it, and a corridor seen end for end scores as high as a true
+    # match (simulated depth cameras: C up to 0.87 at 2-12 m off). Matches that rest on one
+    # submap are one registration repeated: a query misplaced 8.8 m along a corridor matched
+    # the other robot's three consecutive submaps there, and the three agreed (simulated
+    # office, depth camera, seed 3 of benchmarks/merge_sweep.py); min_submaps refuses that
+    # join and lets three matches join elsewhere (docs/guide/merging.md).
+    min_matches: int = 3  #: Consistent matches before two robots' maps join
     min_strong_matches: int = 3  #: ... or this many strong ones (confidence >= strong_confidence)
     strong_confidence: float = 0.75  #: Confidence from which a match counts as strong
+    min_submaps: int = 2  #: ... resting on at least this many submaps of each robot
     # ... and only while the consistent set is at least this share of all the matches verified
     # between them: most verified matches disagreeing is ambiguous geometry (a floor that fills
     # every mixture, a symmetric object seen from the other side), not two matched places.
@@ -401,7 +404,7 @@ class BackendOptions:
         for name in ("translation_floor", "rotation_floor", "prior_sigma"):
             if getattr(self, name) <= 0:
                 raise InvalidInputError(f"BackendOptions.{name} must be > 0")
-        for name in ("min_matches", "min_strong_matches"):
+        for name in ("min_matches", "min_strong_matches", "min_submaps"):
             value = getattr(self, name)
             if int(value) != value or value < 1:
                 raise InvalidInputError(f"BackendOptions.{name} must be an integer >= 1")

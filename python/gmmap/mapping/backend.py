@@ -59,6 +59,7 @@ from gmmap.mapping.consistency import (
     components,
     contradicted,
     drift_prefix,
+    independent,
     max_clique,
     pairwise_mahalanobis,
 )
@@ -311,10 +312,14 @@ class PoseGraph:
         return candidates, rejected, exact
 
     def _enough(self, pair: list[Match]) -> bool:
-        """Whether a robot pair's consistent matches may join their maps (``min_matches``)."""
+        """Whether a robot pair's consistent matches may join their maps: ``min_matches`` of
+        them, or ``min_strong_matches`` strong ones, resting on at least ``min_submaps``
+        submaps of each robot (`independent`; never more than either count asks for)."""
         o = self.options
         strong = sum(m.confidence is None or m.confidence >= o.strong_confidence for m in pair)
-        return len(pair) >= o.min_matches or strong >= o.min_strong_matches
+        enough = len(pair) >= o.min_matches or strong >= o.min_strong_matches
+        least = min(o.min_submaps, o.min_matches, o.min_strong_matches)
+        return enough and independent(pair) >= least
 
     def _pcm(self, pair: list[Match]) -> tuple[set[int], bool]:
         """Indices (into ``pair``) of the largest pairwise-consistent subset."""

@@ -132,6 +132,18 @@ def by_robot_pair(matches: list[Match]) -> dict[tuple[str, str], list[Match]]:
     return pairs
 
 
+def independent(matches: list[Match]) -> int:
+    """How many of one robot pair's ``matches`` count as independent evidence: the fewer
+    distinct submaps either robot gives them. A query misplaced along a corridor matches the
+    other robot's consecutive submaps there, and those matches agree with each other (that
+    robot's odometry moved it along the same corridor), but they all rest on the one query."""
+    sides: dict[str, set[Node]] = {}
+    for m in matches:
+        for node in (m.target, m.source):
+            sides.setdefault(node[0], set()).add(node)
+    return min((len(nodes) for nodes in sides.values()), default=0)
+
+
 def components(robots: list[str], matches: list[Match]) -> list[list[str]]:
     """Connected components of robots linked by matches, each sorted, sorted by first name."""
     parent = {r: r for r in robots}
