@@ -34,7 +34,7 @@ from gmmap.errors import InvalidInputError
 from gmmap.math.geometry import pose_distance
 from gmmap.math.gmm import Gmm
 from gmmap.math.points import as_points
-from gmmap.math.register import Registration, register
+from gmmap.math.register import Registration, apart, register
 from gmmap.options import PlaceOptions, RegisterOptions
 
 RESAMPLE_POINTS = PlaceOptions.resample_points
@@ -212,7 +212,7 @@ def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOpt
     """The confidence of ``match``'s alignment turned half round about +z through the query's
     centre and refined from there, relative to ``match``'s own, both on the upright parts
     (`Registration.upright_confidence`: a floor lines up both ways); 0 when the refinement falls
-    back into ``match``'s basin (within 0.5 m and 30°, as the global search tells basins).
+    back into ``match``'s basin (`gmmap.math.register.apart`).
 
     A corridor seen end for end, or a room with two like halves, lines up both ways. The
     global search holds a second basin only where one of its starts led there, so it often
@@ -224,8 +224,7 @@ def turned(query: Gmm, candidate: Gmm, match: Registration, options: RegisterOpt
         return 0.0
     T = match.transform
     twin = register(query, candidate, half_turned(query, T), options=options)
-    t, angle = pose_distance(twin.transform, T)
-    return twin.upright / own if t > 0.5 or angle > 30 else 0.0
+    return twin.upright / own if apart(twin.transform, T) else 0.0
 
 
 def half_turned(query: Gmm, transform: np.ndarray) -> np.ndarray:

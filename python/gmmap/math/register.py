@@ -228,7 +228,7 @@ def _ranked_upright(
     )
     distinct: list[tuple[float, Registration]] = []
     for c, r in scored:
-        if all(_apart(r.transform, d.transform) for _, d in distinct):
+        if all(apart(r.transform, d.transform) for _, d in distinct):
             distinct.append((c, r))
     top, best = distinct[0]
     scale = best.confidence / top if top > 0 else 0.0
@@ -240,7 +240,9 @@ def _ranked_upright(
     )
 
 
-def _apart(a: np.ndarray, b: np.ndarray) -> bool:
+def apart(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two solutions lie in different basins: 0.5 m or 30° apart, as the Rust core
+    tells them (`distinct` in crates/gmmap-core/src/register.rs)."""
     t, angle = pose_distance(a, b)
     return t > 0.5 or angle > 30.0
 
