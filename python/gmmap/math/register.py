@@ -29,13 +29,12 @@ C on the upright parts. Both frames' +z is up (the search turns about it), so a 
 tilted more than `MAX_TILT_DEG` is not ranked while any other is found: walls alone, with no
 ceiling, line up as well upside down. The best one reports its C on the whole mixtures; the
 others, in ``basins`` and ``alternative_confidence``, their upright C relative to its. On the
-simulated
-office's overlapping pairs (`benchmarks/sensors.py`, seed 0) the best solution is right for 71
-of 120 16-beam LiDAR pairs instead of 62, for 158 of 274 360° LiDAR (2 Hz) pairs instead of
-100, and for 17 of 44 depth-camera chains instead of 8; TUM fr1_xyz's cross-session pairs stay
-12 of 12. Both searches cost about 1.8 times one. Every registration also reports its C on
-the upright parts (`Registration.upright_confidence`), in which verification compares a match
-with its lookalikes and its half-turned twin.
+simulated office's overlapping pairs (`benchmarks/sensors.py`, seed 0) the best solution is
+right for 71 of 120 16-beam LiDAR pairs instead of 62, for 158 of 274 360° LiDAR (2 Hz) pairs
+instead of 100, and for 17 of 44 depth-camera chains instead of 8; TUM fr1_xyz's
+cross-session pairs stay 12 of 12. Both searches cost about 1.8 times one. Every
+registration also reports its C on the upright parts (`Registration.upright_confidence`), in
+which verification compares a match with its lookalikes and its half-turned twin.
 """
 
 from __future__ import annotations
@@ -218,9 +217,9 @@ def _ranked_upright(
     upright: tuple[Gmm, Gmm], results: list[Registration], o: RegisterOptions
 ) -> Registration:
     """The best of ``results`` by C on the ``upright`` parts of the mixtures, with its own C on
-    the whole ones; the other distinct ones (30° or 0.5 m apart, as the core tells basins) in
-    ``basins`` and ``alternative_confidence``, at their upright C relative to its. Solutions
-    tilted more than `MAX_TILT_DEG` are left out while any other is found."""
+    the whole ones; the other distinct ones (`apart`) in ``basins`` and
+    ``alternative_confidence``, at their upright C relative to its. Solutions tilted more than
+    `MAX_TILT_DEG` are left out while any other is found."""
     level = [r for r in results if r.transform[2, 2] >= np.cos(np.radians(MAX_TILT_DEG))]
     scored = sorted(
         ((confidence(*upright, r.transform, o.confidence_scale), r) for r in level or results),
