@@ -139,11 +139,8 @@ def register(
         raise InvalidInputError("scales must be finite and >= 0")
     if yaw_hint is not None and not np.isfinite(yaw_hint):
         raise InvalidInputError(f"yaw_hint must be finite, got {yaw_hint}")
-    if o.level_planes:
-        r = _solve(source, target, init, yaw_hint, scales, o)
-        return replace(r, upright_confidence=r.confidence)
-    upright = _without_level_planes(source), _without_level_planes(target)
-    if upright[0] is None or upright[1] is None:
+    upright = None if o.level_planes else _upright_parts(source, target)
+    if upright is None:
         r = _solve(source, target, init, yaw_hint, scales, o)
         return replace(r, upright_confidence=r.confidence)
     if init is not None:
@@ -198,6 +195,12 @@ def _solve(
     return Registration(
         T, float(confidence), info, int(iterations), elapsed, float(alternative), basins
     )
+
+
+def _upright_parts(source: Gmm, target: Gmm) -> tuple[Gmm, Gmm] | None:
+    """Both mixtures `_without_level_planes`; None when either keeps too few components."""
+    parts = _without_level_planes(source), _without_level_planes(target)
+    return None if parts[0] is None or parts[1] is None else (parts[0], parts[1])
 
 
 def _without_level_planes(gmm: Gmm) -> Gmm | None:
